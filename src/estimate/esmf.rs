@@ -1,0 +1,331 @@
+//! Extended set-membership filter (paper eq. 28-32; Scholte & Campbell 2003).
+//!
+//! The state is known to lie in the ellipsoid `E(x, P) = {z : (z-x)ᵀ P⁻¹ (z-x) ≤ 1}` — `P` is a
+//! *shape*, not a covariance. Prediction is a Minkowski sum (trace-optimal `mink_beta`) of the
+//! linearised set, the process-noise set and the linearisation-error set; the update intersects
+//! with the measurement set (paper's `rho`) and rescales by the consistency `δ_k`.
+//! `δ_k ≤ 0` means the data contradict the sets: that is fault evidence, handled by the policy
+//! of estimators.md §3.5 (see [`EsmfParams`]).
+
+use super::linalg::{cholesky_jitter, sym_top_eigen, symmetrize};
+use super::{Estimator, EstimatorError, check_inputs};
+use crate::model::{BilinearTerm, Model};
+use nalgebra::{SMatrix, SVector};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EsmfParams {
+    /// `δ_k` at or below this is "inconsistent".
+    pub consistency_min: f64,
+    /// On inconsistency, the previous set's AHC block is scaled by this and the step retried:
+    /// the last measurement cannot be explained, so the AHC bounds must grow.
+    pub inflation: f64,
+    pub max_inflations: u32,
+    /// Consecutive inconsistent steps (after all inflations) before the AHC block is reset to P0.
+    pub reset_after: u32,
+}
+
+impl Default for EsmfParams {
+    fn default() -> Self {
+        Self { consistency_min: 1e-6, inflation: 4.0, max_inflations: 10, reset_after: 25 }
+    }
+}
+
+/// Everything one ESMF shape update computes; kept so that the MIT-ESMF can differentiate it.
+#[derive(Debug, Clone, Copy)]
+pub struct ShapeStep<const N: usize, const M: usize> {
+    pub apa: SMatrix<f64, N, N>,
+    /// Linearisation-error set (diagonal) and its half-widths.
+    pub q_bar: SVector<f64, N>,
+    pub half_widths: SVector<f64, N>,
+    /// Process set nested with the linearisation-error set (diagonal), and the nesting beta.
+    pub q_hat: SVector<f64, N>,
+    pub nest_beta: f64,
+    pub mink_beta: f64,
+    /// `Π = P_{k,k-1}`.
+    pub pi: SMatrix<f64, N, N>,
+    pub rho: f64,
+    pub top_lambda: f64,
+    pub top_vec: SVector<f64, M>,
+    pub pi_prime: SMatrix<f64, N, N>,
+    pub w: SMatrix<f64, M, M>,
+    pub w_inv_e: SVector<f64, M>,
+    pub gain: SMatrix<f64, N, M>,
+    pub p_bar: SMatrix<f64, N, N>,
+    pub consistency: f64,
+}
+
+impl<const N: usize, const M: usize> ShapeStep<N, M> {
+    pub fn zeros() -> Self {
+        Self {
+            apa: SMatrix::zeros(),
+            q_bar: SVector::zeros(),
+            half_widths: SVector::zeros(),
+            q_hat: SVector::zeros(),
+            nest_beta: 1.0,
+            mink_beta: 0.5,
+            pi: SMatrix::zeros(),
+            rho: 0.5,
+            top_lambda: 0.0,
+            top_vec: SVector::zeros(),
+            pi_prime: SMatrix::zeros(),
+            w: SMatrix::zeros(),
+            w_inv_e: SVector::zeros(),
+            gain: SMatrix::zeros(),
+            p_bar: SMatrix::zeros(),
+            consistency: 1.0,
+        }
+    }
+
+    /// The updated shape `δ P̄`.
+    pub fn p(&self) -> SMatrix<f64, N, N> {
+        self.p_bar * self.consistency
+    }
+}
+
+/// Range of the bilinear remainder `Σ c z_j z_k` over `dz ∈ E(0, P)`: for one term,
+/// `dz_j dz_k ∈ [(P_jk - √(P_jj P_kk))/2, (P_jk + √(P_jj P_kk))/2]` (exact support; note the ½,
+/// which estimators.md §3.2 drops). Returns the box centre (a shift of the predicted centre)
+/// and half-widths per state row.
+pub fn remainder_box<const N: usize>(
+    terms: &[BilinearTerm],
+    p: &SMatrix<f64, N, N>,
+) -> (SVector<f64, N>, SVector<f64, N>) {
+    let mut center = SVector::<f64, N>::zeros();
+    let mut half = SVector::<f64, N>::zeros();
+    for t in terms {
+        let s = (p[(t.j, t.j)] * p[(t.k, t.k)]).max(0.0).sqrt();
+        center[t.row] += 0.5 * t.coeff * p[(t.j, t.k)];
+        half[t.row] += 0.5 * t.coeff.abs() * s;
+    }
+    (center, half)
+}
+
+/// Number of rows the remainder box spans (the enclosing ellipsoid of a d-box is d·diag(b²)).
+pub fn remainder_dim<const N: usize>(half: &SVector<f64, N>) -> f64 {
+    half.iter().filter(|b| **b > 0.0).count() as f64
+}
+
+/// One ESMF shape update (pure): previous shape `p_prev`, linearisation `a`, process set
+/// diag `q`, remainder half-widths, measurement matrix `h` and set `r`, innovation `e`.
+#[allow(clippy::too_many_arguments)]
+pub fn shape_step<const N: usize, const M: usize>(
+    p_prev: &SMatrix<f64, N, N>,
+    a: &SMatrix<f64, N, N>,
+    q: &SVector<f64, N>,
+    half_widths: &SVector<f64, N>,
+    h: &SMatrix<f64, M, N>,
+    r: &SMatrix<f64, M, M>,
+    r_sqrt_lmax: f64,
+    e: &SVector<f64, M>,
+) -> Result<ShapeStep<N, M>, EstimatorError> {
+    let mut st = ShapeStep::zeros();
+    let mut apa = a * p_prev * a.transpose();
+    symmetrize(&mut apa);
+    st.apa = apa;
+    st.half_widths = *half_widths;
+    let d_r = remainder_dim(half_widths);
+    st.q_bar = half_widths.map(|b| d_r * b * b);
+    // Nest the process set with the linearisation-error set (trace-optimal Minkowski sum).
+    let tr_qbar = st.q_bar.sum();
+    if tr_qbar > 0.0 {
+        let (s1, s2) = (tr_qbar.sqrt(), q.sum().sqrt());
+        st.nest_beta = s2 / (s1 + s2);
+        st.q_hat = st.q_bar / (1.0 - st.nest_beta) + q / st.nest_beta;
+    } else {
+        st.nest_beta = 1.0;
+        st.q_hat = *q;
+    }
+    let (s, t) = (st.q_hat.sum().sqrt(), apa.trace().max(0.0).sqrt());
+    st.mink_beta = if s + t > 0.0 { s / (s + t) } else { 0.5 };
+    let beta = st.mink_beta;
+    let mut pi = apa / (1.0 - beta);
+    for i in 0..N {
+        pi[(i, i)] += st.q_hat[i] / beta;
+    }
+    st.pi = pi;
+    // Paper's rho from the largest eigenvalues of the predicted output set and of R.
+    let (lam, vec) = sym_top_eigen(&(h * pi * h.transpose()));
+    st.top_lambda = lam;
+    st.top_vec = vec;
+    st.rho = r_sqrt_lmax / (lam.max(0.0).sqrt() + r_sqrt_lmax);
+    let rho = st.rho;
+    st.pi_prime = pi / (1.0 - rho);
+    let mut w = h * st.pi_prime * h.transpose() + r / rho;
+    symmetrize(&mut w);
+    st.w = w;
+    let chol = cholesky_jitter(&w, "esmf W")?;
+    st.w_inv_e = chol.solve(e);
+    st.consistency = 1.0 - e.dot(&st.w_inv_e);
+    let hpi = h * st.pi_prime;
+    st.gain = chol.solve(&hpi).transpose();
+    let mut p_bar = st.pi_prime - st.gain * hpi;
+    symmetrize(&mut p_bar);
+    st.p_bar = p_bar;
+    if !p_bar.iter().all(|v| v.is_finite()) {
+        return Err(EstimatorError::NonFinite { what: "ESMF shape" });
+    }
+    Ok(st)
+}
+
+/// Scale rows and columns `from..N` of `p` by `s` (inflates that block by s²).
+pub fn scale_block<const N: usize>(p: &mut SMatrix<f64, N, N>, from: usize, s: f64) {
+    for i in 0..N {
+        for j in 0..N {
+            let f = (if i >= from { s } else { 1.0 }) * (if j >= from { s } else { 1.0 });
+            p[(i, j)] *= f;
+        }
+    }
+}
+
+/// What one ESMF step did, for diagnosis.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EsmfOutcome {
+    /// How many times the previous AHC block was inflated before the data became consistent.
+    pub inflations: u32,
+    /// False when no inflation made the data consistent (the step fell back to `P = P̄`).
+    pub consistent: bool,
+    /// The AHC block was reset to P0 after a run of inconsistent steps.
+    pub reset: bool,
+}
+
+#[derive(Debug, Clone)]
+pub struct Esmf<Mo, const N: usize, const M: usize> {
+    pub model: Mo,
+    pub params: EsmfParams,
+    pub x: SVector<f64, N>,
+    /// Shape matrix of the state set.
+    pub p: SMatrix<f64, N, N>,
+    p0: SMatrix<f64, N, N>,
+    /// Diagonal of the process-noise shape.
+    pub process_noise: SVector<f64, N>,
+    /// Measurement-noise shape.
+    pub r: SMatrix<f64, M, M>,
+    r_sqrt_lmax: f64,
+    /// The last step's intermediate quantities, and its inputs (for the MIT-ESMF).
+    pub last: ShapeStep<N, M>,
+    pub last_a: SMatrix<f64, N, N>,
+    pub last_p_prev: SMatrix<f64, N, N>,
+    pub outcome: EsmfOutcome,
+    pub innovation: SVector<f64, M>,
+    inconsistent_run: u32,
+    /// Counters over the filter's life.
+    pub inconsistent_steps: u64,
+    pub resets: u64,
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
+    pub fn new(
+        model: Mo,
+        params: EsmfParams,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        process_noise: SVector<f64, N>,
+        r: SMatrix<f64, M, M>,
+    ) -> Self {
+        let (lam, _) = sym_top_eigen(&r);
+        Self {
+            model,
+            params,
+            x: x0,
+            p: p0,
+            p0,
+            process_noise,
+            r,
+            r_sqrt_lmax: lam.max(0.0).sqrt(),
+            last: ShapeStep::zeros(),
+            last_a: SMatrix::zeros(),
+            last_p_prev: p0,
+            outcome: EsmfOutcome::default(),
+            innovation: SVector::zeros(),
+            inconsistent_run: 0,
+            inconsistent_steps: 0,
+            resets: 0,
+        }
+    }
+
+    pub fn r_sqrt_lmax(&self) -> f64 {
+        self.r_sqrt_lmax
+    }
+
+    pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<EsmfOutcome, EstimatorError> {
+        check_inputs(self.model.input_dim(), u, y)?;
+        let a = self.model.jacobian(&self.x, u);
+        let fx = self.model.f(&self.x, u);
+        let h = self.model.h_matrix();
+        let ahc = self.model.ahc_start();
+        let mut p_prev = self.p;
+        let mut outcome = EsmfOutcome::default();
+        let (mut st, mut x_prior, mut e);
+        loop {
+            let (center, half) = remainder_box(self.model.bilinear_terms(), &p_prev);
+            x_prior = fx + center;
+            e = y - h * x_prior;
+            st = shape_step(&p_prev, &a, &self.process_noise, &half, &h, &self.r, self.r_sqrt_lmax, &e)?;
+            if st.consistency > self.params.consistency_min {
+                outcome.consistent = true;
+                break;
+            }
+            if outcome.inflations >= self.params.max_inflations {
+                break;
+            }
+            scale_block(&mut p_prev, ahc, self.params.inflation.sqrt());
+            outcome.inflations += 1;
+        }
+        let mut p = if outcome.consistent {
+            self.inconsistent_run = 0;
+            st.p()
+        } else {
+            self.inconsistent_run += 1;
+            self.inconsistent_steps += 1;
+            st.p_bar // δ P̄ would not be positive definite
+        };
+        symmetrize(&mut p);
+        self.x = x_prior + st.gain * e;
+        if self.inconsistent_run >= self.params.reset_after {
+            for i in 0..N {
+                for j in 0..N {
+                    if i >= ahc || j >= ahc {
+                        p[(i, j)] = self.p0[(i, j)];
+                    }
+                }
+            }
+            self.inconsistent_run = 0;
+            self.resets += 1;
+            outcome.reset = true;
+        }
+        self.p = p;
+        self.last = st;
+        self.last_a = a;
+        self.last_p_prev = p_prev;
+        self.innovation = e;
+        self.outcome = outcome;
+        Ok(outcome)
+    }
+
+    /// Projection of the set on coordinate `i`: `x_i ± √P_ii` (exact support function).
+    pub fn projection(&self, i: usize) -> (f64, f64) {
+        let s = self.p[(i, i)].max(0.0).sqrt();
+        (self.x[i] - s, self.x[i] + s)
+    }
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for Esmf<Mo, N, M> {
+    fn name(&self) -> &'static str {
+        "esmf"
+    }
+    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        self.try_step(u, y).map(|_| ())
+    }
+    fn state(&self) -> &SVector<f64, N> {
+        &self.x
+    }
+    fn bounds(&self, i: usize) -> (f64, f64) {
+        self.projection(i)
+    }
+    fn process_noise(&self) -> &SVector<f64, N> {
+        &self.process_noise
+    }
+    fn innovation(&self) -> &SVector<f64, M> {
+        &self.innovation
+    }
+}

@@ -1,0 +1,209 @@
+//! MIT-ESMF: the ESMF with diag(Q) adapted by gradient descent on `J_k = (1 - δ_k) tr P_k`
+//! (paper eq. 33). The gradient is the exact forward-mode derivative of one shape update —
+//! through the nesting beta, the Minkowski beta, rho, W and δ — applied to a recursively
+//! propagated sensitivity `dP_{k-1}/dq_i` (so the AHC entries adapt; with the one-step
+//! sensitivity their gradient only ever pushes them down). What is held fixed is what the MIT
+//! rule holds fixed: the innovation and the linearisation point (the state estimate).
+
+use super::esmf::{EsmfOutcome, ShapeStep, remainder_dim, scale_block};
+use super::mit::{AdaptationParams, StepSchedule, log_step};
+use super::{Esmf, EsmfParams, Estimator, EstimatorError};
+use crate::model::{BilinearTerm, Model};
+use nalgebra::{SMatrix, SVector};
+
+/// `dP_k/dq_i` for every i, and the one-step derivative rules.
+#[derive(Debug, Clone)]
+pub struct ShapeSensitivity<const N: usize> {
+    pub dp: [SMatrix<f64, N, N>; N],
+}
+
+impl<const N: usize> Default for ShapeSensitivity<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> ShapeSensitivity<N> {
+    pub fn new() -> Self {
+        Self { dp: [SMatrix::zeros(); N] }
+    }
+
+    pub fn clear(&mut self) {
+        self.dp = [SMatrix::zeros(); N];
+    }
+
+    /// Gradient `dJ_k/dq_i` of this step for every i, and `dP_k/dq_i` stored for the next one.
+    /// `p_prev` is the previous shape as used by the step (after any inflation), `q` the
+    /// process-noise diagonal in force, `st` the step's intermediate quantities.
+    #[allow(clippy::too_many_arguments)]
+    pub fn gradient_and_propagate<const M: usize>(
+        &mut self,
+        st: &ShapeStep<N, M>,
+        p_prev: &SMatrix<f64, N, N>,
+        a: &SMatrix<f64, N, N>,
+        terms: &[BilinearTerm],
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        r_sqrt_lmax: f64,
+        q: &SVector<f64, N>,
+        forgetting: f64,
+    ) -> SVector<f64, N> {
+        let mut grad = SVector::<f64, N>::zeros();
+        let d_r = remainder_dim(&st.half_widths);
+        let (beta, rho, delta) = (st.mink_beta, st.rho, st.consistency);
+        let tr_qbar = st.q_bar.sum();
+        let (s1, s2) = (tr_qbar.sqrt(), q.sum().sqrt());
+        let (s_hat, t) = (st.q_hat.sum().sqrt(), st.apa.trace().max(0.0).sqrt());
+        let (lam_sqrt, w) = (st.top_lambda.max(0.0).sqrt(), st.w_inv_e);
+        let g = SMatrix::<f64, N, N>::identity() - st.gain * h;
+        let krk = st.gain * r * st.gain.transpose();
+        let p = st.p();
+        let tr_p = p.trace();
+        for i in 0..N {
+            let dp_prev = self.dp[i] * forgetting;
+            let mut dapa = a * dp_prev * a.transpose();
+            super::linalg::symmetrize(&mut dapa);
+            // Linearisation-error set: Q̄_rr = d_r b_r², b_r = Σ |c|/2 √(P_jj P_kk).
+            let mut db = SVector::<f64, N>::zeros();
+            for term in terms {
+                let prod = p_prev[(term.j, term.j)] * p_prev[(term.k, term.k)];
+                if prod > 0.0 {
+                    db[term.row] += 0.25 * term.coeff.abs()
+                        * (dp_prev[(term.j, term.j)] * p_prev[(term.k, term.k)]
+                            + p_prev[(term.j, term.j)] * dp_prev[(term.k, term.k)])
+                        / prod.sqrt();
+                }
+            }
+            let dqbar = st.half_widths.component_mul(&db) * (2.0 * d_r);
+            let mut dq = SVector::<f64, N>::zeros();
+            dq[i] = 1.0;
+            let dq_hat = if tr_qbar > 0.0 {
+                let nb = st.nest_beta;
+                let ds1 = dqbar.sum() / (2.0 * s1);
+                let ds2 = 1.0 / (2.0 * s2);
+                let dnb = (s1 * ds2 - s2 * ds1) / (s1 + s2).powi(2);
+                dqbar / (1.0 - nb) + st.q_bar * (dnb / (1.0 - nb).powi(2)) + dq / nb - q * (dnb / (nb * nb))
+            } else {
+                dq
+            };
+            let ds_hat = dq_hat.sum() / (2.0 * s_hat);
+            let dt = if t > 0.0 { dapa.trace() / (2.0 * t) } else { 0.0 };
+            let dbeta = (t * ds_hat - s_hat * dt) / (s_hat + t).powi(2);
+            let mut dpi = dapa / (1.0 - beta) + st.apa * (dbeta / (1.0 - beta).powi(2));
+            for j in 0..N {
+                dpi[(j, j)] += dq_hat[j] / beta - st.q_hat[j] * dbeta / (beta * beta);
+            }
+            // rho through the top eigenvalue of H Π Hᵀ (simple eigenvalue assumed).
+            let dlam = st.top_vec.dot(&(h * dpi * h.transpose() * st.top_vec));
+            let drho = if lam_sqrt > 0.0 {
+                -r_sqrt_lmax * (dlam / (2.0 * lam_sqrt)) / (r_sqrt_lmax + lam_sqrt).powi(2)
+            } else {
+                0.0
+            };
+            let dpi_prime = dpi / (1.0 - rho) + st.pi * (drho / (1.0 - rho).powi(2));
+            let dw = h * dpi_prime * h.transpose() - r * (drho / (rho * rho));
+            let ddelta = w.dot(&(dw * w));
+            let mut dp_bar = g * dpi_prime * g.transpose() - krk * (drho / (rho * rho));
+            super::linalg::symmetrize(&mut dp_bar);
+            let dp = st.p_bar * ddelta + dp_bar * delta;
+            grad[i] = -ddelta * tr_p + (1.0 - delta) * dp.trace();
+            self.dp[i] = dp;
+        }
+        grad
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct MitEsmf<Mo, const N: usize, const M: usize> {
+    pub esmf: Esmf<Mo, N, M>,
+    pub adapt: AdaptationParams,
+    pub sensitivity: ShapeSensitivity<N>,
+    pub schedule: StepSchedule,
+    pub q0: SVector<f64, N>,
+    pub gradient: SVector<f64, N>,
+    steps: u64,
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
+    pub fn new(
+        model: Mo,
+        params: EsmfParams,
+        adapt: AdaptationParams,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        q0: SVector<f64, N>,
+        r: SMatrix<f64, M, M>,
+    ) -> Self {
+        Self {
+            esmf: Esmf::new(model, params, x0, p0, q0, r),
+            adapt,
+            sensitivity: ShapeSensitivity::new(),
+            schedule: StepSchedule::new(),
+            q0,
+            gradient: SVector::zeros(),
+            steps: 0,
+        }
+    }
+
+    pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<EsmfOutcome, EstimatorError> {
+        let out = self.esmf.try_step(u, y)?;
+        self.steps += 1;
+        // The schedule's change detector: 1 - δ is the set analogue of a normalised innovation.
+        let nis_like = if out.consistent { (1.0 - self.esmf.last.consistency) * M as f64 } else { 4.0 * M as f64 };
+        self.schedule.observe(nis_like, M, &self.adapt);
+        if out.inflations > 0 {
+            let s = self.esmf.params.inflation.sqrt().powi(out.inflations as i32);
+            let ahc = self.esmf.model.ahc_start();
+            for dp in self.sensitivity.dp.iter_mut() {
+                scale_block(dp, ahc, s);
+            }
+        }
+        if !out.consistent || out.reset {
+            self.sensitivity.clear();
+            self.gradient = SVector::zeros();
+            return Ok(out);
+        }
+        let e = &self.esmf;
+        self.gradient = self.sensitivity.gradient_and_propagate(
+            &e.last,
+            &e.last_p_prev,
+            &e.last_a,
+            e.model.bilinear_terms(),
+            &e.model.h_matrix(),
+            &e.r,
+            e.r_sqrt_lmax(),
+            &e.process_noise,
+            self.adapt.forgetting,
+        );
+        if self.steps as usize > self.adapt.window {
+            let eta = self.schedule.eta(&self.adapt);
+            let loss = (1.0 - self.esmf.last.consistency) * self.esmf.p.trace();
+            for i in 0..N {
+                let q = self.esmf.process_noise[i];
+                self.esmf.process_noise[i] = log_step(q, self.gradient[i], eta, loss, self.q0[i], &self.adapt);
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for MitEsmf<Mo, N, M> {
+    fn name(&self) -> &'static str {
+        "mit-esmf"
+    }
+    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        self.try_step(u, y).map(|_| ())
+    }
+    fn state(&self) -> &SVector<f64, N> {
+        &self.esmf.x
+    }
+    fn bounds(&self, i: usize) -> (f64, f64) {
+        self.esmf.projection(i)
+    }
+    fn process_noise(&self) -> &SVector<f64, N> {
+        &self.esmf.process_noise
+    }
+    fn innovation(&self) -> &SVector<f64, M> {
+        &self.esmf.innovation
+    }
+}

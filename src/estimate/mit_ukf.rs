@@ -1,0 +1,108 @@
+//! MIT-UKF: the UKF with diag(Q) adapted by gradient *descent* on
+//! `J_k = tr[(Ĉ_k - S_k)²]` (paper eq. 21-22; the printed sign ascends), using the recursive
+//! sensitivity so that the AHC entries of Q adapt too.
+//!
+//! One refinement of ours ([DERIVED], documented in the README): the MIT rule holds Ĉ fixed, so
+//! it cannot see that a larger AHC noise would make the filter *follow* a fault and shrink the
+//! innovations; the cheapest explanation of a fault's large innovations is then always a larger
+//! rate noise. Rate process noise is white and cannot produce an innovation *mean*, so the rate
+//! entries descend `tr[(Ĉ - μμᵀ - S)²]` (the spread about the windowed mean μ) while the AHC
+//! entries descend the paper's `tr[(Ĉ - S)²]`. A noise step moves the spread, a fault the mean.
+
+use super::mit::{AdaptationParams, InnovationWindow, Sensitivity, StepSchedule, gn_step};
+use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
+use crate::model::Model;
+use nalgebra::{SMatrix, SVector};
+
+#[derive(Debug, Clone)]
+pub struct MitUkf<Mo, const N: usize, const M: usize, const S: usize> {
+    pub ukf: Ukf<Mo, N, M, S>,
+    pub adapt: AdaptationParams,
+    pub window: InnovationWindow<M>,
+    pub sensitivity: Sensitivity<N>,
+    pub schedule: StepSchedule,
+    /// Initial process noise: the reference for the projection box.
+    pub q0: SVector<f64, N>,
+    /// Last gradient ∂J/∂q (for inspection and tests).
+    pub gradient: SVector<f64, N>,
+    steps: u64,
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo, N, M, S> {
+    pub fn new(
+        model: Mo,
+        params: UkfParams,
+        adapt: AdaptationParams,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        q0: SVector<f64, N>,
+        r: SMatrix<f64, M, M>,
+    ) -> Self {
+        Self {
+            ukf: Ukf::new(model, params, x0, p0, q0, r),
+            window: InnovationWindow::new(adapt.window),
+            adapt,
+            sensitivity: Sensitivity::new(),
+            schedule: StepSchedule::new(),
+            q0,
+            gradient: SVector::zeros(),
+            steps: 0,
+        }
+    }
+
+    /// `A_k = F_k (I - K_{k-1} H)` with F at the previous estimate.
+    pub(crate) fn sensitivity_transition(ukf: &Ukf<Mo, N, M, S>, u: &[f64]) -> SMatrix<f64, N, N> {
+        let f = ukf.model.jacobian(&ukf.x, u);
+        f * (SMatrix::<f64, N, N>::identity() - ukf.gain * ukf.model.h_matrix())
+    }
+
+    pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        check_inputs(self.ukf.model.input_dim(), u, y)?;
+        let a = Self::sensitivity_transition(&self.ukf, u);
+        self.ukf.try_step(u, y)?;
+        self.steps += 1;
+        self.window.push(&self.ukf.innovation);
+        self.sensitivity.propagate(&a, self.adapt.forgetting);
+        self.schedule.observe(self.ukf.nis, M, &self.adapt);
+        let d_ahc = self.window.covariance() - self.ukf.s;
+        let d_rates = self.window.centered_covariance() - self.ukf.s;
+        let (grad, curv) =
+            self.sensitivity.gradient(&self.ukf.model.h_matrix(), &d_rates, &d_ahc, self.ukf.model.ahc_start());
+        self.gradient = grad;
+        // Warm-up: no adaptation until the window is full.
+        if self.window.is_full() {
+            let eta = self.schedule.eta(&self.adapt);
+            for i in 0..N {
+                let q = self.ukf.process_noise[i];
+                self.ukf.process_noise[i] = gn_step(q, grad[i], curv[i], eta, self.q0[i], &self.adapt);
+            }
+        }
+        Ok(())
+    }
+
+    /// Restart the step-size schedule (called by diagnosis when a fault decision fires).
+    pub fn restart_adaptation(&mut self) {
+        self.schedule.restart();
+    }
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M> for MitUkf<Mo, N, M, S> {
+    fn name(&self) -> &'static str {
+        "mit-ukf"
+    }
+    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        self.try_step(u, y)
+    }
+    fn state(&self) -> &SVector<f64, N> {
+        &self.ukf.x
+    }
+    fn bounds(&self, i: usize) -> (f64, f64) {
+        self.ukf.three_sigma(i)
+    }
+    fn process_noise(&self) -> &SVector<f64, N> {
+        &self.ukf.process_noise
+    }
+    fn innovation(&self) -> &SVector<f64, M> {
+        &self.ukf.innovation
+    }
+}

@@ -1,0 +1,66 @@
+//! The five estimators of the paper over a [`Model`](crate::model::Model): UKF, MIT-UKF,
+//! KF-UKF, ESMF and MIT-ESMF. Each is a struct with an allocation-free `step(u, y)` over
+//! fixed-size nalgebra types.
+
+mod esmf;
+mod kf_ukf;
+pub mod linalg;
+mod mit;
+mod mit_esmf;
+mod mit_ukf;
+mod ukf;
+
+pub use esmf::{Esmf, EsmfOutcome, EsmfParams, ShapeStep, remainder_box, scale_block, shape_step};
+pub use kf_ukf::{KfUkf, SlaveKfParams};
+pub use mit::{AdaptationParams, InnovationWindow, Sensitivity, StepSchedule};
+pub use mit_esmf::{MitEsmf, ShapeSensitivity};
+pub use mit_ukf::MitUkf;
+pub use ukf::{Ukf, UkfParams};
+
+use nalgebra::SVector;
+use thiserror::Error;
+
+/// What can go wrong in one estimator step. None of these panics; the caller decides
+/// (the monitor emits a `filter_reset` decision and re-initialises the covariance).
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum EstimatorError {
+    #[error("matrix not positive definite in {stage}, even with jitter")]
+    NotPositiveDefinite { stage: &'static str },
+    #[error("input has {got} entries, the model expects {expected}")]
+    InputDimension { expected: usize, got: usize },
+    #[error("non-finite value in the {what}")]
+    NonFinite { what: &'static str },
+}
+
+/// The common face of all five filters, used by `eval` and the monitor.
+pub trait Estimator<const N: usize, const M: usize> {
+    /// Short name: `ukf`, `kf-ukf`, `mit-ukf`, `esmf`, `mit-esmf`.
+    fn name(&self) -> &'static str;
+    /// One predict + update with the commanded inputs `u` and the measurement `y`.
+    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError>;
+    /// The state estimate (for the ESMF: the centre of the set).
+    fn state(&self) -> &SVector<f64, N>;
+    /// Bounds of coordinate `i`: ±3σ for the Kalman filters, the projection of the set for the ESMFs.
+    fn bounds(&self, i: usize) -> (f64, f64);
+    /// The diagonal of the process noise in force (adapted by the MIT and KF variants).
+    fn process_noise(&self) -> &SVector<f64, N>;
+    /// The last innovation `y - h(x⁻)`.
+    fn innovation(&self) -> &SVector<f64, M>;
+}
+
+pub(crate) fn check_inputs<const M: usize>(
+    expected: usize,
+    u: &[f64],
+    y: &SVector<f64, M>,
+) -> Result<(), EstimatorError> {
+    if u.len() != expected {
+        return Err(EstimatorError::InputDimension { expected, got: u.len() });
+    }
+    if !u.iter().all(|v| v.is_finite()) {
+        return Err(EstimatorError::NonFinite { what: "input" });
+    }
+    if !y.iter().all(|v| v.is_finite()) {
+        return Err(EstimatorError::NonFinite { what: "measurement" });
+    }
+    Ok(())
+}

@@ -1,0 +1,207 @@
+//! Unscented Kalman filter with scaled sigma points (Van der Merwe; filterpy's
+//! `MerweScaledSigmaPoints` ordering, so the golden test can compare step by step).
+
+use super::linalg::{cholesky_jitter, symmetrize};
+use super::{Estimator, EstimatorError, check_inputs};
+use crate::model::Model;
+use nalgebra::{SMatrix, SVector};
+
+/// Sigma-point scaling. Default alpha = 1, beta = 2, kappa = 0: lambda = 0, all weights ≥ 0
+/// (a tiny alpha makes W0c ≈ -1e6 and costs orders of magnitude in accuracy).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UkfParams {
+    pub alpha: f64,
+    pub ut_beta: f64,
+    pub kappa: f64,
+    /// Floor on the AHC variances, so an unexcited filter does not go deaf to the next fault.
+    pub ahc_variance_floor: f64,
+}
+
+impl Default for UkfParams {
+    fn default() -> Self {
+        Self { alpha: 1.0, ut_beta: 2.0, kappa: 0.0, ahc_variance_floor: 1e-10 }
+    }
+}
+
+/// UKF over a model with `N` states, `M` measurements and `S = 2N + 1` sigma points.
+#[derive(Debug, Clone)]
+pub struct Ukf<Mo, const N: usize, const M: usize, const S: usize> {
+    pub model: Mo,
+    pub params: UkfParams,
+    /// State estimate.
+    pub x: SVector<f64, N>,
+    /// State covariance.
+    pub p: SMatrix<f64, N, N>,
+    /// Diagonal of the process noise covariance.
+    pub process_noise: SVector<f64, N>,
+    /// Measurement noise covariance.
+    pub r: SMatrix<f64, M, M>,
+    wm: [f64; S],
+    wc: [f64; S],
+    sqrt_c: f64,
+    sigmas: [SVector<f64, N>; S],
+    sigmas_f: [SVector<f64, N>; S],
+    /// Predicted state and covariance of the last step.
+    pub x_prior: SVector<f64, N>,
+    pub p_prior: SMatrix<f64, N, N>,
+    /// Innovation covariance, gain, innovation and its normalised square of the last step.
+    pub s: SMatrix<f64, M, M>,
+    pub gain: SMatrix<f64, N, M>,
+    pub innovation: SVector<f64, M>,
+    pub nis: f64,
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N, M, S> {
+    pub fn new(
+        model: Mo,
+        params: UkfParams,
+        x0: SVector<f64, N>,
+        p0: SMatrix<f64, N, N>,
+        process_noise: SVector<f64, N>,
+        r: SMatrix<f64, M, M>,
+    ) -> Self {
+        assert!(S == 2 * N + 1, "Ukf: S must be 2N+1 (got N={N}, S={S})");
+        let n = N as f64;
+        let lambda = params.alpha * params.alpha * (n + params.kappa) - n;
+        let c = n + lambda;
+        let mut wm = [0.5 / c; S];
+        let mut wc = [0.5 / c; S];
+        wm[0] = lambda / c;
+        wc[0] = lambda / c + (1.0 - params.alpha * params.alpha + params.ut_beta);
+        Self {
+            model,
+            params,
+            x: x0,
+            p: p0,
+            process_noise,
+            r,
+            wm,
+            wc,
+            sqrt_c: c.sqrt(),
+            sigmas: [SVector::zeros(); S],
+            sigmas_f: [SVector::zeros(); S],
+            x_prior: x0,
+            p_prior: p0,
+            s: SMatrix::zeros(),
+            gain: SMatrix::zeros(),
+            innovation: SVector::zeros(),
+            nis: 0.0,
+        }
+    }
+
+    fn draw_sigmas(
+        x: &SVector<f64, N>,
+        p: &SMatrix<f64, N, N>,
+        sqrt_c: f64,
+        out: &mut [SVector<f64, N>; S],
+        stage: &'static str,
+    ) -> Result<(), EstimatorError> {
+        let l = cholesky_jitter(p, stage)?.l();
+        out[0] = *x;
+        for i in 0..N {
+            let col = l.column(i) * sqrt_c;
+            out[i + 1] = x + col;
+            out[N + i + 1] = x - col;
+        }
+        Ok(())
+    }
+
+    /// Time update, then redraw the sigma points from the prediction (so Q reaches S).
+    pub fn predict(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
+        Self::draw_sigmas(&self.x, &self.p, self.sqrt_c, &mut self.sigmas, "predict")?;
+        let mut x = SVector::<f64, N>::zeros();
+        for i in 0..S {
+            self.sigmas_f[i] = self.model.f(&self.sigmas[i], u);
+            x += self.sigmas_f[i] * self.wm[i];
+        }
+        let mut p = SMatrix::<f64, N, N>::from_diagonal(&self.process_noise);
+        for i in 0..S {
+            let d = self.sigmas_f[i] - x;
+            p += (d * d.transpose()) * self.wc[i];
+        }
+        symmetrize(&mut p);
+        self.x_prior = x;
+        self.p_prior = p;
+        self.x = x;
+        self.p = p;
+        Self::draw_sigmas(&self.x, &self.p, self.sqrt_c, &mut self.sigmas, "redraw")
+    }
+
+    /// Measurement update from the redrawn sigma points; Joseph form (h is linear).
+    pub fn update(&mut self, y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        let mut y_pred = SVector::<f64, M>::zeros();
+        let mut ys = [SVector::<f64, M>::zeros(); S];
+        for i in 0..S {
+            ys[i] = self.model.h(&self.sigmas[i]);
+            y_pred += ys[i] * self.wm[i];
+        }
+        let mut s = self.r;
+        let mut pxy = SMatrix::<f64, N, M>::zeros();
+        for i in 0..S {
+            let dy = ys[i] - y_pred;
+            let dx = self.sigmas[i] - self.x;
+            s += (dy * dy.transpose()) * self.wc[i];
+            pxy += (dx * dy.transpose()) * self.wc[i];
+        }
+        symmetrize(&mut s);
+        let s_chol = cholesky_jitter(&s, "innovation covariance")?;
+        // K = Pxy S⁻¹  <=>  Kᵀ = S⁻¹ Pxyᵀ (S symmetric).
+        let gain = s_chol.solve(&pxy.transpose()).transpose();
+        let e = y - y_pred;
+        self.nis = e.dot(&s_chol.solve(&e));
+        self.x += gain * e;
+        let h = self.model.h_matrix();
+        let i_kh = SMatrix::<f64, N, N>::identity() - gain * h;
+        let mut p = i_kh * self.p * i_kh.transpose() + gain * self.r * gain.transpose();
+        symmetrize(&mut p);
+        for i in self.model.ahc_start()..N {
+            if p[(i, i)] < self.params.ahc_variance_floor {
+                p[(i, i)] = self.params.ahc_variance_floor;
+            }
+        }
+        self.p = p;
+        self.s = s;
+        self.gain = gain;
+        self.innovation = e;
+        Ok(())
+    }
+
+    /// One full step. On error the state is left as it was before the step.
+    pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        check_inputs(self.model.input_dim(), u, y)?;
+        let (x0, p0) = (self.x, self.p);
+        let r = self.predict(u).and_then(|_| self.update(y));
+        if r.is_err() {
+            self.x = x0;
+            self.p = p0;
+        }
+        r
+    }
+
+    /// ±3σ bounds of coordinate `i`.
+    pub fn three_sigma(&self, i: usize) -> (f64, f64) {
+        let s = 3.0 * self.p[(i, i)].max(0.0).sqrt();
+        (self.x[i] - s, self.x[i] + s)
+    }
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M> for Ukf<Mo, N, M, S> {
+    fn name(&self) -> &'static str {
+        "ukf"
+    }
+    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        self.try_step(u, y)
+    }
+    fn state(&self) -> &SVector<f64, N> {
+        &self.x
+    }
+    fn bounds(&self, i: usize) -> (f64, f64) {
+        self.three_sigma(i)
+    }
+    fn process_noise(&self) -> &SVector<f64, N> {
+        &self.process_noise
+    }
+    fn innovation(&self) -> &SVector<f64, M> {
+        &self.innovation
+    }
+}

@@ -1,0 +1,12 @@
+//! ahcmon: actuator health monitoring for MAVLink vehicles.
+//!
+//! Data flow: source → telemetry → estimators (MIT-UKF ‖ MIT-ESMF) → diagnosis → sinks.
+//! This crate holds the pure parts (model, estimate, sim, diagnose) and the evaluation harness.
+
+pub mod diagnose;
+pub mod estimate;
+pub mod eval;
+pub mod model;
+pub mod output;
+pub mod scenario;
+pub mod sim;

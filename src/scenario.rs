@@ -1,0 +1,228 @@
+//! Scenario files (TOML, `replay/scenarios/`): vehicle, duration, rate, seed, noise schedules,
+//! excitation and faults. Unknown keys are errors naming the key, the file and the line.
+
+use crate::sim::fault::Fault;
+use crate::sim::noise::NoiseSchedule;
+use crate::sim::paper::{ACTUATORS, Dither};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use thiserror::Error;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    #[serde(default)]
+    pub description: String,
+    /// Vehicle model; this build simulates `paper-heli`.
+    pub vehicle: String,
+    pub duration_s: f64,
+    pub rate_hz: f64,
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    #[serde(default = "default_speed")]
+    pub forward_speed_mps: f64,
+    pub process_noise: NoiseSchedule,
+    pub measurement_noise: NoiseSchedule,
+    #[serde(default)]
+    pub dither: Option<Dither>,
+    #[serde(default, rename = "fault")]
+    pub faults: Vec<Fault>,
+    #[serde(default)]
+    pub eval: EvalSettings,
+}
+
+/// How `eval` judges this scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalSettings {
+    /// Settling tolerance on gamma (for faults that move gamma).
+    pub settle_tol_gamma: f64,
+    /// Settling tolerance on delta (for faults that move only delta), in input units (rad).
+    pub settle_tol_delta: f64,
+    /// The simple detection rule: healthy point outside the bounds for this long.
+    pub detect_persistence_s: f64,
+    /// No decisions before this time (filters warming up).
+    pub warmup_s: f64,
+    /// Steady state = the last fraction of the run.
+    pub steady_fraction: f64,
+}
+
+impl Default for EvalSettings {
+    fn default() -> Self {
+        Self {
+            settle_tol_gamma: 0.05,
+            settle_tol_delta: 0.005,
+            detect_persistence_s: 0.25,
+            warmup_s: 2.0,
+            steady_fraction: 0.25,
+        }
+    }
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+fn default_speed() -> f64 {
+    10.0
+}
+
+#[derive(Debug, Error)]
+pub enum ScenarioError {
+    #[error("{path}: cannot read: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("{path}:{line}: {message}")]
+    Parse { path: String, line: usize, message: String },
+    #[error("{path}: {message}")]
+    Invalid { path: String, message: String },
+    #[error("no scenario file or built-in scenario named `{name}` (built-in: {builtin})")]
+    NotFound { name: String, builtin: String },
+}
+
+/// The scenarios shipped in `replay/scenarios/`, built into the binary so `eval` runs anywhere.
+pub const BUILTIN: &[(&str, &str)] = &[
+    ("paper-fig5-gaussian", include_str!("../replay/scenarios/paper-fig5-gaussian.toml")),
+    ("paper-fig5-uniform", include_str!("../replay/scenarios/paper-fig5-uniform.toml")),
+    ("paper-fig7-sine-delta", include_str!("../replay/scenarios/paper-fig7-sine-delta.toml")),
+    ("paper-fig8-noise-step", include_str!("../replay/scenarios/paper-fig8-noise-step.toml")),
+    ("paper-fig9-uniform-step", include_str!("../replay/scenarios/paper-fig9-uniform-step.toml")),
+    ("paper-fig10-delta-step", include_str!("../replay/scenarios/paper-fig10-delta-step.toml")),
+    ("healthy-10min", include_str!("../replay/scenarios/healthy-10min.toml")),
+];
+
+/// A scenario with the name it is reported under (the file stem).
+#[derive(Debug, Clone)]
+pub struct NamedScenario {
+    pub name: String,
+    pub scenario: Scenario,
+}
+
+impl Scenario {
+    /// Parse and validate TOML text; `path` only names the source in errors.
+    pub fn from_toml(text: &str, path: &str) -> Result<Self, ScenarioError> {
+        let scn: Scenario = toml::from_str(text).map_err(|e| {
+            let line = e.span().map_or(0, |s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            ScenarioError::Parse { path: path.to_string(), line, message: e.message().trim().replace('\n', " ") }
+        })?;
+        scn.validate().map_err(|message| ScenarioError::Invalid { path: path.to_string(), message })?;
+        Ok(scn)
+    }
+
+    pub fn dt(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+
+    pub fn steps(&self) -> usize {
+        (self.duration_s * self.rate_hz).round() as usize
+    }
+
+    /// Time of the first fault onset, if any.
+    pub fn first_fault(&self) -> Option<&Fault> {
+        self.faults.iter().min_by(|a, b| a.t.total_cmp(&b.t))
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        if self.vehicle != "paper-heli" {
+            return Err(format!("vehicle `{}` cannot be simulated by this build (known: paper-heli)", self.vehicle));
+        }
+        for (name, v) in [
+            ("duration_s", self.duration_s),
+            ("rate_hz", self.rate_hz),
+            ("forward_speed_mps", self.forward_speed_mps),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(format!("{name} must be a finite non-negative number (got {v})"));
+            }
+        }
+        if self.duration_s <= 0.0 || self.rate_hz <= 0.0 {
+            return Err("duration_s and rate_hz must be positive".into());
+        }
+        if self.steps() > 50_000_000 {
+            return Err(format!("{} steps is more than this tool will simulate", self.steps()));
+        }
+        self.process_noise.validate().map_err(|e| format!("process_noise: {e}"))?;
+        self.measurement_noise.validate().map_err(|e| format!("measurement_noise: {e}"))?;
+        if let Some(d) = &self.dither
+            && (!d.amplitude_rad.is_finite() || d.freqs_hz.iter().any(|f| !f.is_finite()))
+        {
+            return Err("dither: amplitude and frequencies must be finite".into());
+        }
+        for f in &self.faults {
+            if !ACTUATORS.contains(&f.actuator.as_str()) {
+                return Err(format!("fault actuator `{}` is not one of {}", f.actuator, ACTUATORS.join(", ")));
+            }
+            f.validate()?;
+        }
+        let e = &self.eval;
+        for (name, v) in [
+            ("eval.settle_tol_gamma", e.settle_tol_gamma),
+            ("eval.settle_tol_delta", e.settle_tol_delta),
+            ("eval.detect_persistence_s", e.detect_persistence_s),
+            ("eval.warmup_s", e.warmup_s),
+            ("eval.steady_fraction", e.steady_fraction),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(format!("{name} must be a finite non-negative number (got {v})"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Load a scenario from a file path, or from the built-in set by stem.
+pub fn resolve(name_or_path: &str) -> Result<NamedScenario, ScenarioError> {
+    let path = Path::new(name_or_path);
+    if path.exists() {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ScenarioError::Io { path: name_or_path.to_string(), source })?;
+        let name = path.file_stem().map_or(name_or_path.to_string(), |s| s.to_string_lossy().into_owned());
+        return Ok(NamedScenario { name, scenario: Scenario::from_toml(&text, name_or_path)? });
+    }
+    if let Some((stem, text)) = BUILTIN.iter().find(|(stem, _)| *stem == name_or_path) {
+        let label = format!("replay/scenarios/{stem}.toml");
+        return Ok(NamedScenario { name: stem.to_string(), scenario: Scenario::from_toml(text, &label)? });
+    }
+    if name_or_path.ends_with(".toml") || name_or_path.contains('/') {
+        return Err(ScenarioError::Io {
+            path: name_or_path.to_string(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        });
+    }
+    Err(ScenarioError::NotFound {
+        name: name_or_path.to_string(),
+        builtin: BUILTIN.iter().map(|(s, _)| *s).collect::<Vec<_>>().join(", "),
+    })
+}
+
+/// Every built-in scenario, parsed.
+pub fn all_builtin() -> Result<Vec<NamedScenario>, ScenarioError> {
+    BUILTIN.iter().map(|(stem, _)| resolve(stem)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_scenarios_parse() {
+        let all = all_builtin().unwrap();
+        assert_eq!(all.len(), BUILTIN.len());
+    }
+
+    #[test]
+    fn unknown_key_names_key_file_and_line() {
+        let text = "vehicle = 'paper-heli'\nduration_s = 1.0\nrate_hz = 50.0\nbogus_key = 3\n";
+        let err = Scenario::from_toml(text, "x.toml").unwrap_err().to_string();
+        assert!(err.contains("x.toml:4") && err.contains("bogus_key"), "{err}");
+        assert!(!err.contains('\n'));
+    }
+
+    #[test]
+    fn nan_noise_level_is_rejected() {
+        let text = "vehicle = 'paper-heli'\nduration_s = 1.0\nrate_hz = 50.0\n\
+            process_noise = { kind = 'gaussian', schedule = [{ t = 0.0, level = nan }] }\n\
+            measurement_noise = { kind = 'gaussian', schedule = [{ t = 0.0, level = 1e-6 }] }\n";
+        let err = Scenario::from_toml(text, "n.toml").unwrap_err().to_string();
+        assert!(err.contains("process_noise") && err.contains("NaN"), "{err}");
+    }
+}
