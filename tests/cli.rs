@@ -1,0 +1,105 @@
+//! The binary on bad input: a one-line error, exit code 2, no panic.
+
+mod common;
+
+use std::process::Command;
+
+fn ahcmon(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon")).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn assert_one_line_error(args: &[&str], must_contain: &[&str]) {
+    let (code, _, err) = ahcmon(args);
+    assert_eq!(code, 2, "exit code for {args:?}; stderr: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    for s in must_contain {
+        assert!(err.contains(s), "`{s}` missing from: {err}");
+    }
+}
+
+const VALID: &str = r#"vehicle = "paper-heli"
+duration_s = 2.0
+rate_hz = 50.0
+process_noise = { kind = "gaussian", schedule = [{ t = 0.0, level = 1e-4 }] }
+measurement_noise = { kind = "gaussian", schedule = [{ t = 0.0, level = 2.89e-6 }] }
+"#;
+
+#[test]
+fn missing_file() {
+    assert_one_line_error(&["eval", "does/not/exist.toml"], &["does/not/exist.toml"]);
+    assert_one_line_error(&["eval", "no-such-scenario"], &["no-such-scenario", "paper-fig5-gaussian"]);
+}
+
+#[test]
+fn unknown_key_is_named_with_file_and_line() {
+    let dir = common::temp_dir("cli_unknown_key");
+    let path = dir.join("typo.toml");
+    std::fs::write(&path, format!("{VALID}proces_noise_typo = 1\n")).unwrap();
+    let p = path.to_str().unwrap();
+    assert_one_line_error(&["eval", p], &[p, ":6:", "proces_noise_typo"]);
+    let nested = dir.join("nested.toml");
+    std::fs::write(&nested, format!("{VALID}[[fault]]\nactuator = \"lon\"\nt = 1.0\ngama = 0.5\n")).unwrap();
+    assert_one_line_error(&["eval", nested.to_str().unwrap()], &["gama"]);
+}
+
+#[test]
+fn nan_noise_level() {
+    let dir = common::temp_dir("cli_nan");
+    let path = dir.join("nan.toml");
+    std::fs::write(&path, VALID.replace("level = 1e-4", "level = nan")).unwrap();
+    assert_one_line_error(&["eval", path.to_str().unwrap()], &["process_noise", "NaN"]);
+}
+
+#[test]
+fn bad_arguments_exit_2() {
+    let (code, _, _) = ahcmon(&["eval", "--seeds", "0"]);
+    assert_eq!(code, 2);
+    let (code, _, _) = ahcmon(&["frobnicate"]);
+    assert_eq!(code, 2);
+}
+
+#[test]
+fn a_valid_file_runs_and_json_has_the_contract_keys() {
+    let dir = common::temp_dir("cli_valid");
+    let path = dir.join("short.toml");
+    std::fs::write(&path, VALID).unwrap();
+    let (code, out, err) = ahcmon(&["eval", path.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 5);
+    let filters: Vec<&str> = rows.iter().map(|r| r["filter"].as_str().unwrap()).collect();
+    assert_eq!(filters, ["ukf", "kf-ukf", "mit-ukf", "esmf", "mit-esmf"]);
+    for key in [
+        "scenario",
+        "filter",
+        "detection_delay_s",
+        "settle_s",
+        "gamma_rmse_3s",
+        "gamma_rmse_steady",
+        "delta_rmse_steady",
+        "truth_in_bounds_pct",
+        "false_decisions",
+        "us_per_step",
+    ] {
+        assert!(rows[0].get(key).is_some(), "key {key} missing");
+    }
+    assert_eq!(rows[0]["scenario"], "short");
+    assert!(rows[0]["detection_delay_s"].is_null(), "no fault, no detection");
+}
+
+#[test]
+fn plot_writes_valid_svg() {
+    let dir = common::temp_dir("cli_plot");
+    let (code, _, err) = ahcmon(&["eval", "paper-fig5-gaussian", "--plot", dir.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let svg = std::fs::read_to_string(dir.join("paper-fig5-gaussian.svg")).unwrap();
+    assert!(svg.starts_with("<?xml") && svg.trim_end().ends_with("</svg>"));
+    assert!(svg.matches("<polyline").count() >= 2 * (1 + 5 * 3));
+}

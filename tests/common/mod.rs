@@ -1,0 +1,39 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The Python with the reference packages: `AHCMON_PYTHON`, else the project's `.venv`
+/// (what `.ci/run` creates), else `python3`.
+pub fn python() -> PathBuf {
+    if let Ok(p) = std::env::var("AHCMON_PYTHON") {
+        return PathBuf::from(p);
+    }
+    let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
+    if venv.exists() { venv } else { PathBuf::from("python3") }
+}
+
+/// Run a reference script; a missing interpreter or package fails the test with the fix in the message.
+pub fn run_python(args: &[&str]) {
+    let py = python();
+    let out = Command::new(&py)
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}; run `bash .ci/run` once (it creates .venv)", py.display()));
+    assert!(
+        out.status.success(),
+        "{} {:?} failed: {}\n(the reference needs filterpy==2.0.0 and numpy: `bash .ci/run` installs them into .venv)",
+        py.display(),
+        args,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
