@@ -1,1 +1,128 @@
-fn main() {}
+//! One step of each filter on the paper model (n = 5), and the whole 2000-step paper run of all
+//! five filters with the simulator (the paper's Table 2 took 31 s for the five).
+
+use ahcmon::estimate::{
+    AdaptationParams, Esmf, EsmfParams, KfUkf, MitEsmf, MitUkf, SlaveKfParams, Ukf, UkfParams,
+};
+use ahcmon::eval::bank::{BankNoise, kalman_p0, set_p0, x0};
+use ahcmon::eval::run_scenario;
+use ahcmon::model::PaperHeli;
+use ahcmon::scenario;
+use ahcmon::sim::paper::{PaperSample, PaperSim, PaperSimConfig, paper_params};
+use criterion::{Criterion, criterion_group, criterion_main};
+use std::hint::black_box;
+
+fn data() -> (Vec<PaperSample>, BankNoise) {
+    let named = scenario::resolve("paper-fig5-gaussian").unwrap();
+    let s = &named.scenario;
+    let mut sim = PaperSim::new(PaperSimConfig {
+        dt: s.dt(),
+        forward_speed: s.forward_speed_mps,
+        process_noise: s.process_noise.clone(),
+        measurement_noise: s.measurement_noise.clone(),
+        faults: s.faults.clone(),
+        dither: s.dither.clone(),
+        seed: 1,
+    })
+    .unwrap();
+    (
+        (0..s.steps()).map(|_| sim.step()).collect(),
+        BankNoise::nominal(&s.process_noise, &s.measurement_noise),
+    )
+}
+
+/// Time one step, cycling through a recorded run (the filter keeps going; it never sees the end).
+macro_rules! bench_step {
+    ($c:expr, $name:expr, $filter:expr, $data:expr) => {{
+        let mut f = $filter;
+        let mut k = 0usize;
+        $c.bench_function($name, |b| {
+            b.iter(|| {
+                let s = &$data[k % $data.len()];
+                k += 1;
+                let _ = black_box(f.try_step(black_box(&s.u), black_box(&s.y)));
+            })
+        });
+    }};
+}
+
+fn steps(c: &mut Criterion) {
+    let (data, n) = data();
+    let m = PaperHeli::new(paper_params(10.0), 0.02);
+    let (u, a) = (UkfParams::default(), AdaptationParams::default());
+    bench_step!(
+        c,
+        "step/ukf",
+        Ukf::<_, 5, 3, 11>::new(m.clone(), u, x0(), kalman_p0(), n.kalman_q(), n.kalman_r()),
+        data
+    );
+    bench_step!(
+        c,
+        "step/kf-ukf",
+        KfUkf::<_, 5, 3, 11>::new(
+            m.clone(),
+            u,
+            a,
+            SlaveKfParams::default(),
+            x0(),
+            kalman_p0(),
+            n.kalman_q(),
+            n.kalman_r()
+        ),
+        data
+    );
+    bench_step!(
+        c,
+        "step/mit-ukf",
+        MitUkf::<_, 5, 3, 11>::new(
+            m.clone(),
+            u,
+            a,
+            x0(),
+            kalman_p0(),
+            n.kalman_q(),
+            n.kalman_r()
+        ),
+        data
+    );
+    bench_step!(
+        c,
+        "step/esmf",
+        Esmf::new(
+            m.clone(),
+            EsmfParams::default(),
+            x0(),
+            set_p0(),
+            n.set_q(),
+            n.set_r()
+        ),
+        data
+    );
+    bench_step!(
+        c,
+        "step/mit-esmf",
+        MitEsmf::new(
+            m.clone(),
+            EsmfParams::default(),
+            a,
+            x0(),
+            set_p0(),
+            n.set_q(),
+            n.set_r()
+        ),
+        data
+    );
+}
+
+fn paper_run(c: &mut Criterion) {
+    let named = scenario::resolve("paper-fig8-noise-step").unwrap();
+    let mut g = c.benchmark_group("paper-run");
+    g.sample_size(20);
+    g.bench_function("2000 steps, sim + five filters + scoring", |b| {
+        b.iter(|| black_box(run_scenario(&named, 1, false).unwrap()))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, steps, paper_run);
+criterion_main!(benches);

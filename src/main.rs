@@ -10,7 +10,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "ahcmon", version, about = "Actuator health monitor: estimates each actuator's gain (gamma) and bias (delta) with MIT-UKF and MIT-ESMF")]
+#[command(
+    name = "ahcmon",
+    version,
+    about = "Actuator health monitor: estimates each actuator's gain (gamma) and bias (delta) with MIT-UKF and MIT-ESMF"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -47,7 +51,11 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let msg = e.chain().map(|c| c.to_string()).collect::<Vec<_>>().join(": ");
+            let msg = e
+                .chain()
+                .map(|c| c.to_string())
+                .collect::<Vec<_>>()
+                .join(": ");
             eprintln!("ahcmon: error: {}", msg.replace('\n', " "));
             ExitCode::from(if is_input_error(&e) { 2 } else { 1 })
         }
@@ -56,7 +64,12 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Eval { scenarios, json, plot, seeds } => eval(scenarios, json, plot, seeds),
+        Command::Eval {
+            scenarios,
+            json,
+            plot,
+            seeds,
+        } => eval(scenarios, json, plot, seeds),
     }
 }
 
@@ -64,10 +77,14 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
     let list: Vec<NamedScenario> = if names.is_empty() {
         scenario::all_builtin()?
     } else {
-        names.iter().map(|n| scenario::resolve(n)).collect::<Result<_, _>>()?
+        names
+            .iter()
+            .map(|n| scenario::resolve(n))
+            .collect::<Result<_, _>>()?
     };
     if let Some(dir) = &plot {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create plot directory {}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create plot directory {}", dir.display()))?;
     }
     let progress = std::io::stderr().is_terminal();
     let mut rows = vec![];
@@ -82,7 +99,8 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
         }
         if let (Some(dir), Some(first)) = (&plot, runs.first()) {
             let path = dir.join(format!("{}.svg", named.name));
-            std::fs::write(&path, svg::render(first)).with_context(|| format!("cannot write {}", path.display()))?;
+            std::fs::write(&path, svg::render(first))
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
         rows.extend(aggregate(&runs));
     }

@@ -70,9 +70,16 @@ fn default_speed() -> f64 {
 #[derive(Debug, Error)]
 pub enum ScenarioError {
     #[error("{path}: cannot read: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("{path}:{line}: {message}")]
-    Parse { path: String, line: usize, message: String },
+    Parse {
+        path: String,
+        line: usize,
+        message: String,
+    },
     #[error("{path}: {message}")]
     Invalid { path: String, message: String },
     #[error("no scenario file or built-in scenario named `{name}` (built-in: {builtin})")]
@@ -81,13 +88,34 @@ pub enum ScenarioError {
 
 /// The scenarios shipped in `replay/scenarios/`, built into the binary so `eval` runs anywhere.
 pub const BUILTIN: &[(&str, &str)] = &[
-    ("paper-fig5-gaussian", include_str!("../replay/scenarios/paper-fig5-gaussian.toml")),
-    ("paper-fig5-uniform", include_str!("../replay/scenarios/paper-fig5-uniform.toml")),
-    ("paper-fig7-sine-delta", include_str!("../replay/scenarios/paper-fig7-sine-delta.toml")),
-    ("paper-fig8-noise-step", include_str!("../replay/scenarios/paper-fig8-noise-step.toml")),
-    ("paper-fig9-uniform-step", include_str!("../replay/scenarios/paper-fig9-uniform-step.toml")),
-    ("paper-fig10-delta-step", include_str!("../replay/scenarios/paper-fig10-delta-step.toml")),
-    ("healthy-10min", include_str!("../replay/scenarios/healthy-10min.toml")),
+    (
+        "paper-fig5-gaussian",
+        include_str!("../replay/scenarios/paper-fig5-gaussian.toml"),
+    ),
+    (
+        "paper-fig5-uniform",
+        include_str!("../replay/scenarios/paper-fig5-uniform.toml"),
+    ),
+    (
+        "paper-fig7-sine-delta",
+        include_str!("../replay/scenarios/paper-fig7-sine-delta.toml"),
+    ),
+    (
+        "paper-fig8-noise-step",
+        include_str!("../replay/scenarios/paper-fig8-noise-step.toml"),
+    ),
+    (
+        "paper-fig9-uniform-step",
+        include_str!("../replay/scenarios/paper-fig9-uniform-step.toml"),
+    ),
+    (
+        "paper-fig10-delta-step",
+        include_str!("../replay/scenarios/paper-fig10-delta-step.toml"),
+    ),
+    (
+        "healthy-10min",
+        include_str!("../replay/scenarios/healthy-10min.toml"),
+    ),
 ];
 
 /// A scenario with the name it is reported under (the file stem).
@@ -101,10 +129,19 @@ impl Scenario {
     /// Parse and validate TOML text; `path` only names the source in errors.
     pub fn from_toml(text: &str, path: &str) -> Result<Self, ScenarioError> {
         let scn: Scenario = toml::from_str(text).map_err(|e| {
-            let line = e.span().map_or(0, |s| text[..s.start.min(text.len())].matches('\n').count() + 1);
-            ScenarioError::Parse { path: path.to_string(), line, message: e.message().trim().replace('\n', " ") }
+            let line = e.span().map_or(0, |s| {
+                text[..s.start.min(text.len())].matches('\n').count() + 1
+            });
+            ScenarioError::Parse {
+                path: path.to_string(),
+                line,
+                message: e.message().trim().replace('\n', " "),
+            }
         })?;
-        scn.validate().map_err(|message| ScenarioError::Invalid { path: path.to_string(), message })?;
+        scn.validate().map_err(|message| ScenarioError::Invalid {
+            path: path.to_string(),
+            message,
+        })?;
         Ok(scn)
     }
 
@@ -123,7 +160,10 @@ impl Scenario {
 
     fn validate(&self) -> Result<(), String> {
         if self.vehicle != "paper-heli" {
-            return Err(format!("vehicle `{}` cannot be simulated by this build (known: paper-heli)", self.vehicle));
+            return Err(format!(
+                "vehicle `{}` cannot be simulated by this build (known: paper-heli)",
+                self.vehicle
+            ));
         }
         for (name, v) in [
             ("duration_s", self.duration_s),
@@ -131,17 +171,26 @@ impl Scenario {
             ("forward_speed_mps", self.forward_speed_mps),
         ] {
             if !v.is_finite() || v < 0.0 {
-                return Err(format!("{name} must be a finite non-negative number (got {v})"));
+                return Err(format!(
+                    "{name} must be a finite non-negative number (got {v})"
+                ));
             }
         }
         if self.duration_s <= 0.0 || self.rate_hz <= 0.0 {
             return Err("duration_s and rate_hz must be positive".into());
         }
         if self.steps() > 50_000_000 {
-            return Err(format!("{} steps is more than this tool will simulate", self.steps()));
+            return Err(format!(
+                "{} steps is more than this tool will simulate",
+                self.steps()
+            ));
         }
-        self.process_noise.validate().map_err(|e| format!("process_noise: {e}"))?;
-        self.measurement_noise.validate().map_err(|e| format!("measurement_noise: {e}"))?;
+        self.process_noise
+            .validate()
+            .map_err(|e| format!("process_noise: {e}"))?;
+        self.measurement_noise
+            .validate()
+            .map_err(|e| format!("measurement_noise: {e}"))?;
         if let Some(d) = &self.dither
             && (!d.amplitude_rad.is_finite() || d.freqs_hz.iter().any(|f| !f.is_finite()))
         {
@@ -149,7 +198,11 @@ impl Scenario {
         }
         for f in &self.faults {
             if !ACTUATORS.contains(&f.actuator.as_str()) {
-                return Err(format!("fault actuator `{}` is not one of {}", f.actuator, ACTUATORS.join(", ")));
+                return Err(format!(
+                    "fault actuator `{}` is not one of {}",
+                    f.actuator,
+                    ACTUATORS.join(", ")
+                ));
             }
             f.validate()?;
         }
@@ -162,7 +215,9 @@ impl Scenario {
             ("eval.steady_fraction", e.steady_fraction),
         ] {
             if !v.is_finite() || v < 0.0 {
-                return Err(format!("{name} must be a finite non-negative number (got {v})"));
+                return Err(format!(
+                    "{name} must be a finite non-negative number (got {v})"
+                ));
             }
         }
         Ok(())
@@ -173,14 +228,24 @@ impl Scenario {
 pub fn resolve(name_or_path: &str) -> Result<NamedScenario, ScenarioError> {
     let path = Path::new(name_or_path);
     if path.exists() {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ScenarioError::Io { path: name_or_path.to_string(), source })?;
-        let name = path.file_stem().map_or(name_or_path.to_string(), |s| s.to_string_lossy().into_owned());
-        return Ok(NamedScenario { name, scenario: Scenario::from_toml(&text, name_or_path)? });
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
+            path: name_or_path.to_string(),
+            source,
+        })?;
+        let name = path.file_stem().map_or(name_or_path.to_string(), |s| {
+            s.to_string_lossy().into_owned()
+        });
+        return Ok(NamedScenario {
+            name,
+            scenario: Scenario::from_toml(&text, name_or_path)?,
+        });
     }
     if let Some((stem, text)) = BUILTIN.iter().find(|(stem, _)| *stem == name_or_path) {
         let label = format!("replay/scenarios/{stem}.toml");
-        return Ok(NamedScenario { name: stem.to_string(), scenario: Scenario::from_toml(text, &label)? });
+        return Ok(NamedScenario {
+            name: stem.to_string(),
+            scenario: Scenario::from_toml(text, &label)?,
+        });
     }
     if name_or_path.ends_with(".toml") || name_or_path.contains('/') {
         return Err(ScenarioError::Io {
@@ -190,7 +255,11 @@ pub fn resolve(name_or_path: &str) -> Result<NamedScenario, ScenarioError> {
     }
     Err(ScenarioError::NotFound {
         name: name_or_path.to_string(),
-        builtin: BUILTIN.iter().map(|(s, _)| *s).collect::<Vec<_>>().join(", "),
+        builtin: BUILTIN
+            .iter()
+            .map(|(s, _)| *s)
+            .collect::<Vec<_>>()
+            .join(", "),
     })
 }
 
@@ -213,7 +282,10 @@ mod tests {
     fn unknown_key_names_key_file_and_line() {
         let text = "vehicle = 'paper-heli'\nduration_s = 1.0\nrate_hz = 50.0\nbogus_key = 3\n";
         let err = Scenario::from_toml(text, "x.toml").unwrap_err().to_string();
-        assert!(err.contains("x.toml:4") && err.contains("bogus_key"), "{err}");
+        assert!(
+            err.contains("x.toml:4") && err.contains("bogus_key"),
+            "{err}"
+        );
         assert!(!err.contains('\n'));
     }
 
@@ -223,6 +295,9 @@ mod tests {
             process_noise = { kind = 'gaussian', schedule = [{ t = 0.0, level = nan }] }\n\
             measurement_noise = { kind = 'gaussian', schedule = [{ t = 0.0, level = 1e-6 }] }\n";
         let err = Scenario::from_toml(text, "n.toml").unwrap_err().to_string();
-        assert!(err.contains("process_noise") && err.contains("NaN"), "{err}");
+        assert!(
+            err.contains("process_noise") && err.contains("NaN"),
+            "{err}"
+        );
     }
 }

@@ -5,7 +5,10 @@ mod common;
 use std::process::Command;
 
 fn ahcmon(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon")).args(args).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .args(args)
+        .output()
+        .unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -33,7 +36,10 @@ measurement_noise = { kind = "gaussian", schedule = [{ t = 0.0, level = 2.89e-6 
 #[test]
 fn missing_file() {
     assert_one_line_error(&["eval", "does/not/exist.toml"], &["does/not/exist.toml"]);
-    assert_one_line_error(&["eval", "no-such-scenario"], &["no-such-scenario", "paper-fig5-gaussian"]);
+    assert_one_line_error(
+        &["eval", "no-such-scenario"],
+        &["no-such-scenario", "paper-fig5-gaussian"],
+    );
 }
 
 #[test]
@@ -44,7 +50,11 @@ fn unknown_key_is_named_with_file_and_line() {
     let p = path.to_str().unwrap();
     assert_one_line_error(&["eval", p], &[p, ":6:", "proces_noise_typo"]);
     let nested = dir.join("nested.toml");
-    std::fs::write(&nested, format!("{VALID}[[fault]]\nactuator = \"lon\"\nt = 1.0\ngama = 0.5\n")).unwrap();
+    std::fs::write(
+        &nested,
+        format!("{VALID}[[fault]]\nactuator = \"lon\"\nt = 1.0\ngama = 0.5\n"),
+    )
+    .unwrap();
     assert_one_line_error(&["eval", nested.to_str().unwrap()], &["gama"]);
 }
 
@@ -91,13 +101,21 @@ fn a_valid_file_runs_and_json_has_the_contract_keys() {
         assert!(rows[0].get(key).is_some(), "key {key} missing");
     }
     assert_eq!(rows[0]["scenario"], "short");
-    assert!(rows[0]["detection_delay_s"].is_null(), "no fault, no detection");
+    assert!(
+        rows[0]["detection_delay_s"].is_null(),
+        "no fault, no detection"
+    );
 }
 
 #[test]
 fn plot_writes_valid_svg() {
     let dir = common::temp_dir("cli_plot");
-    let (code, _, err) = ahcmon(&["eval", "paper-fig5-gaussian", "--plot", dir.to_str().unwrap()]);
+    let (code, _, err) = ahcmon(&[
+        "eval",
+        "paper-fig5-gaussian",
+        "--plot",
+        dir.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let svg = std::fs::read_to_string(dir.join("paper-fig5-gaussian.svg")).unwrap();
     assert!(svg.starts_with("<?xml") && svg.trim_end().ends_with("</svg>"));

@@ -11,7 +11,11 @@ use ahcmon::sim::rng::Rng;
 use nalgebra::{SMatrix, SVector};
 
 /// Uniform sample in E(c, P).
-fn in_ellipsoid<const N: usize>(rng: &mut Rng, c: &SVector<f64, N>, l: &SMatrix<f64, N, N>) -> SVector<f64, N> {
+fn in_ellipsoid<const N: usize>(
+    rng: &mut Rng,
+    c: &SVector<f64, N>,
+    l: &SMatrix<f64, N, N>,
+) -> SVector<f64, N> {
     let mut d = SVector::<f64, N>::from_fn(|_, _| rng.normal());
     d /= d.norm();
     let radius = rng.uniform01().powf(1.0 / N as f64);
@@ -25,7 +29,14 @@ fn updated_set_contains_every_consistent_point() {
         &NoiseSchedule::constant(NoiseKind::Uniform, 0.025),
     );
     let m = PaperHeli::new(paper_params(10.0), 0.02);
-    let mut f = Esmf::new(m.clone(), EsmfParams::default(), x0(), set_p0(), n.set_q(), n.set_r());
+    let mut f = Esmf::new(
+        m.clone(),
+        EsmfParams::default(),
+        x0(),
+        set_p0(),
+        n.set_q(),
+        n.set_r(),
+    );
     // A prior with sizeable rates, so the gyroscopic linearisation error matters.
     f.x = SVector::from([0.4, -0.3, 0.5, 0.9, 0.01]);
     f.p = SMatrix::from_diagonal(&SVector::from([0.04, 0.03, 0.05, 0.05, 1e-4]));
@@ -37,7 +48,8 @@ fn updated_set_contains_every_consistent_point() {
     let l_prev = p_prev.cholesky().unwrap().l();
     let l_q = SMatrix::from_diagonal(&n.set_q()).cholesky().unwrap().l();
     // The measurement: from a point of the prior through the model, plus noise in its set.
-    let truth = m.f(&in_ellipsoid(&mut rng, &x_prev, &l_prev), &u) + in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
+    let truth = m.f(&in_ellipsoid(&mut rng, &x_prev, &l_prev), &u)
+        + in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
     let r_inv = f.r.try_inverse().unwrap();
     let y = m.h(&truth) + SVector::<f64, 3>::from([0.005, -0.004, 0.003]);
     let out = f.try_step(&u, &y).unwrap();
@@ -45,7 +57,8 @@ fn updated_set_contains_every_consistent_point() {
     let p_inv = f.p.try_inverse().unwrap();
     let (mut accepted, mut worst) = (0usize, 0.0f64);
     for _ in 0..4_000_000 {
-        let z = m.f(&in_ellipsoid(&mut rng, &x_prev, &l_prev), &u) + in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
+        let z = m.f(&in_ellipsoid(&mut rng, &x_prev, &l_prev), &u)
+            + in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
         let v = y - m.h(&z);
         if v.dot(&(r_inv * v)) > 1.0 {
             continue;
@@ -58,8 +71,14 @@ fn updated_set_contains_every_consistent_point() {
         }
     }
     println!("accepted {accepted} points; largest (z-x)ᵀP⁻¹(z-x) = {worst:.4}");
-    assert!(accepted >= 10_000, "only {accepted} consistent points sampled");
-    assert!(worst <= 1.0 + 1e-9, "a consistent point lies outside the updated set: {worst}");
+    assert!(
+        accepted >= 10_000,
+        "only {accepted} consistent points sampled"
+    );
+    assert!(
+        worst <= 1.0 + 1e-9,
+        "a consistent point lies outside the updated set: {worst}"
+    );
 }
 
 #[test]
@@ -76,7 +95,10 @@ fn remainder_box_is_the_exact_range_of_the_bilinear_terms() {
     // Sample the boundary densely; the range of each row's remainder must touch both box ends.
     let l = p.cholesky().unwrap().l();
     let mut rng = Rng::new(2);
-    let (mut lo, mut hi) = (SVector::<f64, 5>::repeat(f64::INFINITY), SVector::<f64, 5>::repeat(f64::NEG_INFINITY));
+    let (mut lo, mut hi) = (
+        SVector::<f64, 5>::repeat(f64::INFINITY),
+        SVector::<f64, 5>::repeat(f64::NEG_INFINITY),
+    );
     for _ in 0..400_000 {
         let mut d = SVector::<f64, 5>::from_fn(|_, _| rng.normal());
         d /= d.norm();
@@ -90,8 +112,14 @@ fn remainder_box_is_the_exact_range_of_the_bilinear_terms() {
     }
     for i in 0..3 {
         let (blo, bhi) = (center[i] - half[i], center[i] + half[i]);
-        assert!(lo[i] >= blo - 1e-12 && hi[i] <= bhi + 1e-12, "row {i}: sampled range outside the box");
+        assert!(
+            lo[i] >= blo - 1e-12 && hi[i] <= bhi + 1e-12,
+            "row {i}: sampled range outside the box"
+        );
         // Tight: the sampled extremes reach the box ends (to 1 % of the width).
-        assert!((lo[i] - blo).abs() < 0.01 * (bhi - blo) && (hi[i] - bhi).abs() < 0.01 * (bhi - blo), "row {i}: box not tight");
+        assert!(
+            (lo[i] - blo).abs() < 0.01 * (bhi - blo) && (hi[i] - bhi).abs() < 0.01 * (bhi - blo),
+            "row {i}: box not tight"
+        );
     }
 }

@@ -24,7 +24,10 @@ fn model(linear: bool) -> PaperHeli {
 fn ukf(m: PaperHeli, alpha: f64) -> Ukf<PaperHeli, 5, 3, 11> {
     Ukf::new(
         m,
-        UkfParams { alpha, ..UkfParams::default() },
+        UkfParams {
+            alpha,
+            ..UkfParams::default()
+        },
         SVector::from([0.0, 0.0, 0.0, 1.0, 0.0]),
         SMatrix::from_diagonal(&SVector::from(P0_DIAG)),
         SVector::from(Q_DIAG),
@@ -44,7 +47,11 @@ fn golden(alpha: f64) {
     let params = dir.join("params.json");
     let out = dir.join("filterpy.csv");
     std::fs::write(&params, cfg.to_string()).unwrap();
-    common::run_python(&["tests/reference/filterpy_ukf.py", params.to_str().unwrap(), out.to_str().unwrap()]);
+    common::run_python(&[
+        "tests/reference/filterpy_ukf.py",
+        params.to_str().unwrap(),
+        out.to_str().unwrap(),
+    ]);
     let text = std::fs::read_to_string(&out).unwrap();
     let mut f = ukf(m, alpha);
     let (mut worst_x, mut worst_p, mut rows) = (0.0f64, 0.0f64, 0);
@@ -63,8 +70,14 @@ fn golden(alpha: f64) {
     }
     assert_eq!(rows, 2000);
     println!("alpha {alpha}: max |dx| = {worst_x:.3e}, max |dP|/max|P| = {worst_p:.3e}");
-    assert!(worst_x <= 1e-9, "state differs from filterpy by {worst_x:e}");
-    assert!(worst_p <= 1e-9, "covariance differs from filterpy by {worst_p:e} (relative)");
+    assert!(
+        worst_x <= 1e-9,
+        "state differs from filterpy by {worst_x:e}"
+    );
+    assert!(
+        worst_p <= 1e-9,
+        "covariance differs from filterpy by {worst_p:e} (relative)"
+    );
 }
 
 #[test]
@@ -94,7 +107,12 @@ fn ukf_equals_linear_kf_on_linear_model() {
     let mut worst = 0.0f64;
     for k in 0..2000 {
         let t = k as f64 * 0.02;
-        let u = [u_trim[0], u_trim[1] + 0.004 * (4.4 * t).sin(), u_trim[2] + 0.01 * (2.5 * t).sin(), u_trim[3]];
+        let u = [
+            u_trim[0],
+            u_trim[1] + 0.004 * (4.4 * t).sin(),
+            u_trim[2] + 0.01 * (2.5 * t).sin(),
+            u_trim[3],
+        ];
         if k == 1000 {
             truth[3] = 0.5;
         }

@@ -2,7 +2,7 @@
 //! sensitivity over 50 steps, for every q_i including the AHC entries.
 
 use ahcmon::estimate::{
-    EsmfParams, Esmf, Sensitivity, ShapeSensitivity, Ukf, UkfParams, remainder_box, shape_step,
+    Esmf, EsmfParams, Sensitivity, ShapeSensitivity, Ukf, UkfParams, remainder_box, shape_step,
 };
 use ahcmon::eval::bank::{BankNoise, kalman_p0, set_p0, x0};
 use ahcmon::model::{Model, PaperHeli, PaperHeliParams};
@@ -19,18 +19,25 @@ fn model(linear: bool) -> PaperHeli {
 }
 
 fn noise(kind: NoiseKind, level: f64, meas: f64) -> BankNoise {
-    BankNoise::nominal(&NoiseSchedule::constant(kind, level), &NoiseSchedule::constant(kind, meas))
+    BankNoise::nominal(
+        &NoiseSchedule::constant(kind, level),
+        &NoiseSchedule::constant(kind, meas),
+    )
 }
 
 fn samples(n: usize, kind: NoiseKind, level: f64, meas: f64) -> Vec<PaperSample> {
-    let fault: ahcmon::sim::fault::Fault = toml::from_str("actuator='lon'\nt=1.5\ngamma=0.6").unwrap();
+    let fault: ahcmon::sim::fault::Fault =
+        toml::from_str("actuator='lon'\nt=1.5\ngamma=0.6").unwrap();
     let mut sim = PaperSim::new(PaperSimConfig {
         dt: 0.02,
         forward_speed: 10.0,
         process_noise: NoiseSchedule::constant(kind, level),
         measurement_noise: NoiseSchedule::constant(kind, meas),
         faults: vec![fault],
-        dither: Some(ahcmon::sim::paper::Dither { amplitude_rad: 0.02, freqs_hz: vec![0.23, 0.61, 1.3] }),
+        dither: Some(ahcmon::sim::paper::Dither {
+            amplitude_rad: 0.02,
+            freqs_hz: vec![0.23, 0.61, 1.3],
+        }),
         seed: 3,
     })
     .unwrap();
@@ -79,7 +86,10 @@ fn mit_ukf_one_step_gradient_matches_finite_differences() {
         };
         let fd = (j(1.0) - j(-1.0)) / (2.0 * h);
         let err = rel_err(g[i], fd, scale);
-        println!("one-step UKF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}", g[i], fd);
+        println!(
+            "one-step UKF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}",
+            g[i], fd
+        );
         assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
     }
     // The trap of estimators.md §0.4: the one-step gradient of every AHC entry is zero.
@@ -124,18 +134,31 @@ fn mit_ukf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
         let err_s = (ds_fd - hmh).amax() / hmh.amax();
         let fd = (j_of(&sp, &c) - j_of(&sm, &c)) / (2.0 * h);
         let err = rel_err(g[i], fd, scale);
-        println!("50-step UKF q{i}: dS rel {err_s:.2e}; dJ analytic {:.6e} fd {:.6e} rel {err:.2e}", g[i], fd);
+        println!(
+            "50-step UKF q{i}: dS rel {err_s:.2e}; dJ analytic {:.6e} fd {:.6e} rel {err:.2e}",
+            g[i], fd
+        );
         assert!(err_s <= 1e-5, "q{i}: dS/dq differs by {err_s:e}");
         assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
         if i >= 3 {
-            assert!(g[i].abs() > 1e-6 * scale, "AHC entry q{i} must have a non-zero gradient");
+            assert!(
+                g[i].abs() > 1e-6 * scale,
+                "AHC entry q{i} must have a non-zero gradient"
+            );
         }
     }
 }
 
 fn esmf(m: PaperHeli) -> Esmf<PaperHeli, 5, 3> {
     let n = noise(NoiseKind::Uniform, 0.03, 2.94e-3);
-    Esmf::new(m, EsmfParams::default(), x0(), set_p0(), n.set_q(), n.set_r())
+    Esmf::new(
+        m,
+        EsmfParams::default(),
+        x0(),
+        set_p0(),
+        n.set_q(),
+        n.set_r(),
+    )
 }
 
 #[test]
@@ -150,7 +173,10 @@ fn mit_esmf_one_step_gradient_matches_finite_differences() {
     let mut nominal = base.clone();
     let out = nominal.try_step(&s.u, &s.y).unwrap();
     assert!(out.consistent && out.inflations == 0);
-    assert!(nominal.last.q_bar.sum() > 0.0, "the test must exercise the linearisation-error chain");
+    assert!(
+        nominal.last.q_bar.sum() > 0.0,
+        "the test must exercise the linearisation-error chain"
+    );
     let mut sens = ShapeSensitivity::<5>::new();
     let q = nominal.process_noise;
     let g = sens.gradient_and_propagate(
@@ -176,7 +202,10 @@ fn mit_esmf_one_step_gradient_matches_finite_differences() {
         };
         let fd = (j(1.0) - j(-1.0)) / (2.0 * h);
         let err = rel_err(g[i], fd, scale);
-        println!("one-step ESMF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}", g[i], fd);
+        println!(
+            "one-step ESMF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}",
+            g[i], fd
+        );
         assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
     }
 }
@@ -198,7 +227,9 @@ fn mit_esmf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
         rec.push((f.last_a, f.innovation));
     }
     let (h, r, rl, q) = (m.h_matrix(), f.r, f.r_sqrt_lmax(), f.process_noise);
-    let run = |q: &SVector<f64, 5>, mut sens: Option<&mut ShapeSensitivity<5>>| -> (f64, SVector<f64, 5>) {
+    let run = |q: &SVector<f64, 5>,
+               mut sens: Option<&mut ShapeSensitivity<5>>|
+     -> (f64, SVector<f64, 5>) {
         let mut p = p_start;
         let mut g = SVector::zeros();
         let mut j = 0.0;
@@ -225,7 +256,10 @@ fn mit_esmf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
         qm[i] -= hh;
         let fd = (run(&qp, None).0 - run(&qm, None).0) / (2.0 * hh);
         let err = rel_err(g[i], fd, scale);
-        println!("50-step ESMF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}", g[i], fd);
+        println!(
+            "50-step ESMF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}",
+            g[i], fd
+        );
         assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
     }
 }
@@ -249,7 +283,15 @@ fn ahc_process_noise_moves_after_a_fault() {
         n.kalman_q(),
         n.kalman_r(),
     );
-    let mut me = MitEsmf::new(m, EsmfParams::default(), AdaptationParams::default(), x0(), set_p0(), n.set_q(), n.set_r());
+    let mut me = MitEsmf::new(
+        m,
+        EsmfParams::default(),
+        AdaptationParams::default(),
+        x0(),
+        set_p0(),
+        n.set_q(),
+        n.set_r(),
+    );
     let (mut before_u, mut before_e) = (SVector::<f64, 5>::zeros(), SVector::<f64, 5>::zeros());
     let (mut max_u, mut max_e) = (0.0f64, 0.0f64);
     for s in &data {
@@ -263,7 +305,9 @@ fn ahc_process_noise_moves_after_a_fault() {
             max_e = max_e.max(me.esmf.process_noise[3] / before_e[3]);
         }
     }
-    println!("q_gamma grew x{max_u:.1} (MIT-UKF), x{max_e:.1} (MIT-ESMF) within 2.5 s of the fault");
+    println!(
+        "q_gamma grew x{max_u:.1} (MIT-UKF), x{max_e:.1} (MIT-ESMF) within 2.5 s of the fault"
+    );
     assert!(max_u > 10.0, "MIT-UKF q_gamma did not move: x{max_u}");
     assert!(max_e.is_finite());
 }

@@ -37,10 +37,16 @@ impl BoundsDetector {
     }
 
     /// Feed one step's bounds of gamma and delta.
-    pub fn update(&mut self, gamma_bounds: (f64, f64), delta_bounds: (f64, f64)) -> Option<BoundsEvent> {
+    pub fn update(
+        &mut self,
+        gamma_bounds: (f64, f64),
+        delta_bounds: (f64, f64),
+    ) -> Option<BoundsEvent> {
         self.steps += 1;
-        let healthy_inside =
-            gamma_bounds.0 <= 1.0 && 1.0 <= gamma_bounds.1 && delta_bounds.0 <= 0.0 && 0.0 <= delta_bounds.1;
+        let healthy_inside = gamma_bounds.0 <= 1.0
+            && 1.0 <= gamma_bounds.1
+            && delta_bounds.0 <= 0.0
+            && 0.0 <= delta_bounds.1;
         if self.steps <= self.warmup_steps {
             return None;
         }

@@ -26,7 +26,12 @@ pub struct EsmfParams {
 
 impl Default for EsmfParams {
     fn default() -> Self {
-        Self { consistency_min: 1e-6, inflation: 4.0, max_inflations: 10, reset_after: 25 }
+        Self {
+            consistency_min: 1e-6,
+            inflation: 4.0,
+            max_inflations: 10,
+            reset_after: 25,
+        }
     }
 }
 
@@ -247,7 +252,11 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         self.r_sqrt_lmax
     }
 
-    pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<EsmfOutcome, EstimatorError> {
+    pub fn try_step(
+        &mut self,
+        u: &[f64],
+        y: &SVector<f64, M>,
+    ) -> Result<EsmfOutcome, EstimatorError> {
         check_inputs(self.model.input_dim(), u, y)?;
         let a = self.model.jacobian(&self.x, u);
         let fx = self.model.f(&self.x, u);
@@ -260,7 +269,16 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             let (center, half) = remainder_box(self.model.bilinear_terms(), &p_prev);
             x_prior = fx + center;
             e = y - h * x_prior;
-            st = shape_step(&p_prev, &a, &self.process_noise, &half, &h, &self.r, self.r_sqrt_lmax, &e)?;
+            st = shape_step(
+                &p_prev,
+                &a,
+                &self.process_noise,
+                &half,
+                &h,
+                &self.r,
+                self.r_sqrt_lmax,
+                &e,
+            )?;
             if st.consistency > self.params.consistency_min {
                 outcome.consistent = true;
                 break;

@@ -19,7 +19,10 @@ pub struct SlaveKfParams {
 
 impl Default for SlaveKfParams {
     fn default() -> Self {
-        Self { initial_rel_std: 1.0, walk_rel_std: 0.05 }
+        Self {
+            initial_rel_std: 1.0,
+            walk_rel_std: 0.05,
+        }
     }
 }
 
@@ -98,14 +101,18 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, 
         let dq = gain * resid;
         for i in 0..N {
             let q = self.ukf.process_noise[i] + dq[i];
-            self.ukf.process_noise[i] =
-                q.clamp(self.q0[i] * self.adapt.q_min_factor, self.q0[i] * self.adapt.q_max_factor);
+            self.ukf.process_noise[i] = q.clamp(
+                self.q0[i] * self.adapt.q_min_factor,
+                self.q0[i] * self.adapt.q_max_factor,
+            );
         }
         Ok(())
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M> for KfUkf<Mo, N, M, S> {
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M>
+    for KfUkf<Mo, N, M, S>
+{
     fn name(&self) -> &'static str {
         "kf-ukf"
     }

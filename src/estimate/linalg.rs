@@ -23,7 +23,10 @@ pub fn cholesky_jitter<const N: usize>(
     if let Some(c) = p.cholesky() {
         return Ok(c);
     }
-    let scale = (0..N).map(|i| p[(i, i)].abs()).fold(0.0_f64, f64::max).max(f64::MIN_POSITIVE);
+    let scale = (0..N)
+        .map(|i| p[(i, i)].abs())
+        .fold(0.0_f64, f64::max)
+        .max(f64::MIN_POSITIVE);
     for eps in [1e-12, 1e-10, 1e-8] {
         let mut q = *p;
         symmetrize(&mut q);
@@ -118,6 +121,9 @@ mod tests {
         let p = v * v.transpose();
         assert!(cholesky_jitter(&p, "test").is_ok());
         let bad = SMatrix::<f64, 2, 2>::new(1.0, 0.0, 0.0, -1.0);
-        assert!(matches!(cholesky_jitter(&bad, "test"), Err(EstimatorError::NotPositiveDefinite { .. })));
+        assert!(matches!(
+            cholesky_jitter(&bad, "test"),
+            Err(EstimatorError::NotPositiveDefinite { .. })
+        ));
     }
 }

@@ -86,12 +86,20 @@ impl<const M: usize> InnovationWindow<M> {
 
     /// `Ĉ_k`: the mean of e eᵀ over the window (over the samples so far before it is full).
     pub fn covariance(&self) -> SMatrix<f64, M, M> {
-        if self.count == 0 { SMatrix::zeros() } else { self.sum / self.count as f64 }
+        if self.count == 0 {
+            SMatrix::zeros()
+        } else {
+            self.sum / self.count as f64
+        }
     }
 
     /// The windowed innovation mean.
     pub fn mean(&self) -> SVector<f64, M> {
-        if self.count == 0 { SVector::zeros() } else { self.sum_e / self.count as f64 }
+        if self.count == 0 {
+            SVector::zeros()
+        } else {
+            self.sum_e / self.count as f64
+        }
     }
 
     /// `Ĉ_k - μ μᵀ`: the spread of the innovations about their windowed mean.
@@ -131,7 +139,9 @@ impl<const N: usize> Default for Sensitivity<N> {
 impl<const N: usize> Sensitivity<N> {
     /// Start at `M_i,0 = 0` (no history yet).
     pub fn new() -> Self {
-        Self { m: [SMatrix::zeros(); N] }
+        Self {
+            m: [SMatrix::zeros(); N],
+        }
     }
 
     pub fn propagate(&mut self, a: &SMatrix<f64, N, N>, forgetting: f64) {
@@ -182,7 +192,11 @@ impl Default for StepSchedule {
 
 impl StepSchedule {
     pub fn new() -> Self {
-        Self { since_restart: 0, cusum: 0.0, restarts: 0 }
+        Self {
+            since_restart: 0,
+            cusum: 0.0,
+            restarts: 0,
+        }
     }
 
     pub fn eta(&self, p: &AdaptationParams) -> f64 {
@@ -218,7 +232,9 @@ pub fn gn_step(q: f64, grad: f64, curvature: f64, eta: f64, q0: f64, p: &Adaptat
     }
     let target = q - eta * grad / curvature;
     let (lo, hi) = (q * (-p.max_log_step).exp(), q * p.max_log_step.exp());
-    target.clamp(lo, hi).clamp(q0 * p.q_min_factor, q0 * p.q_max_factor)
+    target
+        .clamp(lo, hi)
+        .clamp(q0 * p.q_min_factor, q0 * p.q_max_factor)
 }
 
 /// Projected multiplicative step `q ← clamp(q·exp(-η ∂ln J/∂ln q))` with `∂ln J/∂ln q = q g / J`:

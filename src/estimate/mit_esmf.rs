@@ -25,7 +25,9 @@ impl<const N: usize> Default for ShapeSensitivity<N> {
 
 impl<const N: usize> ShapeSensitivity<N> {
     pub fn new() -> Self {
-        Self { dp: [SMatrix::zeros(); N] }
+        Self {
+            dp: [SMatrix::zeros(); N],
+        }
     }
 
     pub fn clear(&mut self) {
@@ -68,7 +70,8 @@ impl<const N: usize> ShapeSensitivity<N> {
             for term in terms {
                 let prod = p_prev[(term.j, term.j)] * p_prev[(term.k, term.k)];
                 if prod > 0.0 {
-                    db[term.row] += 0.25 * term.coeff.abs()
+                    db[term.row] += 0.25
+                        * term.coeff.abs()
                         * (dp_prev[(term.j, term.j)] * p_prev[(term.k, term.k)]
                             + p_prev[(term.j, term.j)] * dp_prev[(term.k, term.k)])
                         / prod.sqrt();
@@ -82,12 +85,17 @@ impl<const N: usize> ShapeSensitivity<N> {
                 let ds1 = dqbar.sum() / (2.0 * s1);
                 let ds2 = 1.0 / (2.0 * s2);
                 let dnb = (s1 * ds2 - s2 * ds1) / (s1 + s2).powi(2);
-                dqbar / (1.0 - nb) + st.q_bar * (dnb / (1.0 - nb).powi(2)) + dq / nb - q * (dnb / (nb * nb))
+                dqbar / (1.0 - nb) + st.q_bar * (dnb / (1.0 - nb).powi(2)) + dq / nb
+                    - q * (dnb / (nb * nb))
             } else {
                 dq
             };
             let ds_hat = dq_hat.sum() / (2.0 * s_hat);
-            let dt = if t > 0.0 { dapa.trace() / (2.0 * t) } else { 0.0 };
+            let dt = if t > 0.0 {
+                dapa.trace() / (2.0 * t)
+            } else {
+                0.0
+            };
             let dbeta = (t * ds_hat - s_hat * dt) / (s_hat + t).powi(2);
             let mut dpi = dapa / (1.0 - beta) + st.apa * (dbeta / (1.0 - beta).powi(2));
             for j in 0..N {
@@ -145,14 +153,27 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
         }
     }
 
-    pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<EsmfOutcome, EstimatorError> {
+    pub fn try_step(
+        &mut self,
+        u: &[f64],
+        y: &SVector<f64, M>,
+    ) -> Result<EsmfOutcome, EstimatorError> {
         let out = self.esmf.try_step(u, y)?;
         self.steps += 1;
         // The schedule's change detector: 1 - δ is the set analogue of a normalised innovation.
-        let nis_like = if out.consistent { (1.0 - self.esmf.last.consistency) * M as f64 } else { 4.0 * M as f64 };
+        let nis_like = if out.consistent {
+            (1.0 - self.esmf.last.consistency) * M as f64
+        } else {
+            4.0 * M as f64
+        };
         self.schedule.observe(nis_like, M, &self.adapt);
         if out.inflations > 0 {
-            let s = self.esmf.params.inflation.sqrt().powi(out.inflations as i32);
+            let s = self
+                .esmf
+                .params
+                .inflation
+                .sqrt()
+                .powi(out.inflations as i32);
             let ahc = self.esmf.model.ahc_start();
             for dp in self.sensitivity.dp.iter_mut() {
                 scale_block(dp, ahc, s);
@@ -180,7 +201,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
             let loss = (1.0 - self.esmf.last.consistency) * self.esmf.p.trace();
             for i in 0..N {
                 let q = self.esmf.process_noise[i];
-                self.esmf.process_noise[i] = log_step(q, self.gradient[i], eta, loss, self.q0[i], &self.adapt);
+                self.esmf.process_noise[i] =
+                    log_step(q, self.gradient[i], eta, loss, self.q0[i], &self.adapt);
             }
         }
         Ok(out)

@@ -66,15 +66,20 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         let d_ahc = self.window.covariance() - self.ukf.s;
         let d_rates = self.window.centered_covariance() - self.ukf.s;
-        let (grad, curv) =
-            self.sensitivity.gradient(&self.ukf.model.h_matrix(), &d_rates, &d_ahc, self.ukf.model.ahc_start());
+        let (grad, curv) = self.sensitivity.gradient(
+            &self.ukf.model.h_matrix(),
+            &d_rates,
+            &d_ahc,
+            self.ukf.model.ahc_start(),
+        );
         self.gradient = grad;
         // Warm-up: no adaptation until the window is full.
         if self.window.is_full() {
             let eta = self.schedule.eta(&self.adapt);
             for i in 0..N {
                 let q = self.ukf.process_noise[i];
-                self.ukf.process_noise[i] = gn_step(q, grad[i], curv[i], eta, self.q0[i], &self.adapt);
+                self.ukf.process_noise[i] =
+                    gn_step(q, grad[i], curv[i], eta, self.q0[i], &self.adapt);
             }
         }
         Ok(())
@@ -86,7 +91,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M> for MitUkf<Mo, N, M, S> {
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M>
+    for MitUkf<Mo, N, M, S>
+{
     fn name(&self) -> &'static str {
         "mit-ukf"
     }

@@ -54,13 +54,18 @@ pub(crate) fn check_inputs<const M: usize>(
     y: &SVector<f64, M>,
 ) -> Result<(), EstimatorError> {
     if u.len() != expected {
-        return Err(EstimatorError::InputDimension { expected, got: u.len() });
+        return Err(EstimatorError::InputDimension {
+            expected,
+            got: u.len(),
+        });
     }
     if !u.iter().all(|v| v.is_finite()) {
         return Err(EstimatorError::NonFinite { what: "input" });
     }
     if !y.iter().all(|v| v.is_finite()) {
-        return Err(EstimatorError::NonFinite { what: "measurement" });
+        return Err(EstimatorError::NonFinite {
+            what: "measurement",
+        });
     }
     Ok(())
 }

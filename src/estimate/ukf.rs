@@ -19,7 +19,12 @@ pub struct UkfParams {
 
 impl Default for UkfParams {
     fn default() -> Self {
-        Self { alpha: 1.0, ut_beta: 2.0, kappa: 0.0, ahc_variance_floor: 1e-10 }
+        Self {
+            alpha: 1.0,
+            ut_beta: 2.0,
+            kappa: 0.0,
+            ahc_variance_floor: 1e-10,
+        }
     }
 }
 
@@ -131,17 +136,17 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     pub fn update(&mut self, y: &SVector<f64, M>) -> Result<(), EstimatorError> {
         let mut y_pred = SVector::<f64, M>::zeros();
         let mut ys = [SVector::<f64, M>::zeros(); S];
-        for i in 0..S {
-            ys[i] = self.model.h(&self.sigmas[i]);
-            y_pred += ys[i] * self.wm[i];
+        for ((yi, sigma), wm) in ys.iter_mut().zip(&self.sigmas).zip(&self.wm) {
+            *yi = self.model.h(sigma);
+            y_pred += *yi * *wm;
         }
         let mut s = self.r;
         let mut pxy = SMatrix::<f64, N, M>::zeros();
-        for i in 0..S {
-            let dy = ys[i] - y_pred;
-            let dx = self.sigmas[i] - self.x;
-            s += (dy * dy.transpose()) * self.wc[i];
-            pxy += (dx * dy.transpose()) * self.wc[i];
+        for ((yi, sigma), wc) in ys.iter().zip(&self.sigmas).zip(&self.wc) {
+            let dy = yi - y_pred;
+            let dx = sigma - self.x;
+            s += (dy * dy.transpose()) * *wc;
+            pxy += (dx * dy.transpose()) * *wc;
         }
         symmetrize(&mut s);
         let s_chol = cholesky_jitter(&s, "innovation covariance")?;
@@ -185,7 +190,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M> for Ukf<Mo, N, M, S> {
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M>
+    for Ukf<Mo, N, M, S>
+{
     fn name(&self) -> &'static str {
         "ukf"
     }

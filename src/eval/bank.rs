@@ -3,7 +3,8 @@
 //! or the faults that come later). One configuration for every scenario: no per-scenario tuning.
 
 use crate::estimate::{
-    AdaptationParams, Esmf, EsmfParams, Estimator, KfUkf, MitEsmf, MitUkf, SlaveKfParams, Ukf, UkfParams,
+    AdaptationParams, Esmf, EsmfParams, Estimator, KfUkf, MitEsmf, MitUkf, SlaveKfParams, Ukf,
+    UkfParams,
 };
 use crate::model::PaperHeli;
 use crate::sim::noise::NoiseSchedule;
@@ -58,7 +59,13 @@ impl BankNoise {
     /// enclosed by the ellipsoid d·diag(half-width²), d = 5.
     pub fn set_q(&self) -> SVector<f64, 5> {
         let b = self.process_bound;
-        SVector::from([b * b, b * b, b * b, (3.0 * GAMMA_WALK_STD).powi(2), (3.0 * DELTA_WALK_STD).powi(2)]) * 5.0
+        SVector::from([
+            b * b,
+            b * b,
+            b * b,
+            (3.0 * GAMMA_WALK_STD).powi(2),
+            (3.0 * DELTA_WALK_STD).powi(2),
+        ]) * 5.0
     }
 
     /// Set-filter measurement shape: a 3-D box enclosed by 3·diag(b²).
@@ -84,7 +91,14 @@ pub fn paper_bank(model: &PaperHeli, noise: &BankNoise) -> Vec<PaperFilter> {
     let ukf = UkfParams::default();
     let adapt = AdaptationParams::default();
     vec![
-        Box::new(Ukf::<_, 5, 3, 11>::new(model.clone(), ukf, x0(), kalman_p0(), noise.kalman_q(), noise.kalman_r())),
+        Box::new(Ukf::<_, 5, 3, 11>::new(
+            model.clone(),
+            ukf,
+            x0(),
+            kalman_p0(),
+            noise.kalman_q(),
+            noise.kalman_r(),
+        )),
         Box::new(KfUkf::<_, 5, 3, 11>::new(
             model.clone(),
             ukf,
@@ -104,7 +118,14 @@ pub fn paper_bank(model: &PaperHeli, noise: &BankNoise) -> Vec<PaperFilter> {
             noise.kalman_q(),
             noise.kalman_r(),
         )),
-        Box::new(Esmf::new(model.clone(), EsmfParams::default(), x0(), set_p0(), noise.set_q(), noise.set_r())),
+        Box::new(Esmf::new(
+            model.clone(),
+            EsmfParams::default(),
+            x0(),
+            set_p0(),
+            noise.set_q(),
+            noise.set_r(),
+        )),
         Box::new(MitEsmf::new(
             model.clone(),
             EsmfParams::default(),

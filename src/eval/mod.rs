@@ -122,7 +122,12 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
     let mut acc: Vec<Accum> = bank
         .iter()
         .map(|_| Accum {
-            detector: BoundsDetector::new(dt, settings.detect_persistence_s, CLEAR_S, settings.warmup_s),
+            detector: BoundsDetector::new(
+                dt,
+                settings.detect_persistence_s,
+                CLEAR_S,
+                settings.warmup_s,
+            ),
             decisions: vec![],
             false_decisions: 0,
             first_detection: None,
@@ -191,7 +196,9 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
                     a.sq_3s.0 += (g - g_true).powi(2);
                     a.sq_3s.1 += 1;
                 }
-                let err = if moves_gamma { (g - g_true).abs() > settings.settle_tol_gamma } else {
+                let err = if moves_gamma {
+                    (g - g_true).abs() > settings.settle_tol_gamma
+                } else {
                     (d - d_true).abs() > settings.settle_tol_delta
                 };
                 if t_step >= t0 && err {
@@ -200,15 +207,33 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
             }
         }
     }
-    let rms = |(s, n): (f64, usize)| if n == 0 { f64::NAN } else { (s / n as f64).sqrt() };
-    let pct = |(i, n): (usize, usize)| if n == 0 { f64::NAN } else { 100.0 * i as f64 / n as f64 };
+    let rms = |(s, n): (f64, usize)| {
+        if n == 0 {
+            f64::NAN
+        } else {
+            (s / n as f64).sqrt()
+        }
+    };
+    let pct = |(i, n): (usize, usize)| {
+        if n == 0 {
+            f64::NAN
+        } else {
+            100.0 * i as f64 / n as f64
+        }
+    };
     let filters = acc
         .into_iter()
         .zip(FILTERS)
         .map(|(a, name)| {
-            let ended_violating = a.last_violation.is_some_and(|t| t >= steps as f64 * dt - 0.5 * dt);
+            let ended_violating = a
+                .last_violation
+                .is_some_and(|t| t >= steps as f64 * dt - 0.5 * dt);
             let settle_s = onset.and_then(|t0| {
-                if ended_violating { None } else { Some(a.last_violation.map_or(0.0, |t| t - t0)) }
+                if ended_violating {
+                    None
+                } else {
+                    Some(a.last_violation.map_or(0.0, |t| t - t0))
+                }
             });
             FilterRun {
                 filter: name,
@@ -229,7 +254,13 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
             }
         })
         .collect();
-    Ok(Run { scenario: named.name.clone(), seed, truth, filters, final_speed })
+    Ok(Run {
+        scenario: named.name.clone(),
+        seed,
+        truth,
+        filters,
+        final_speed,
+    })
 }
 
 /// One row of the eval table: one scenario × filter, aggregated over seeds.
@@ -256,13 +287,18 @@ pub struct Row {
 }
 
 pub fn aggregate(runs: &[Run]) -> Vec<Row> {
-    let Some(first) = runs.first() else { return vec![] };
+    let Some(first) = runs.first() else {
+        return vec![];
+    };
     let n = runs.len() as f64;
     (0..first.filters.len())
         .map(|i| {
             let ms: Vec<&Metrics> = runs.iter().map(|r| &r.filters[i].metrics).collect();
             let worst = |f: &dyn Fn(&Metrics) -> Option<f64>| -> Option<f64> {
-                ms.iter().map(|m| f(m)).collect::<Option<Vec<f64>>>().map(|v| v.into_iter().fold(f64::MIN, f64::max))
+                ms.iter()
+                    .map(|m| f(m))
+                    .collect::<Option<Vec<f64>>>()
+                    .map(|v| v.into_iter().fold(f64::MIN, f64::max))
             };
             let mean = |f: &dyn Fn(&Metrics) -> f64| ms.iter().map(|m| f(m)).sum::<f64>() / n;
             Row {

@@ -115,13 +115,32 @@ impl PaperHeli {
         for i in 0..3 {
             phi[i] = (a[i] * dt).exp();
             // a -> 0 limit is dt (pure integrator).
-            zoh[i] = if a[i].abs() < 1e-12 { dt } else { (phi[i] - 1.0) / a[i] };
+            zoh[i] = if a[i].abs() < 1e-12 {
+                dt
+            } else {
+                (phi[i] - 1.0) / a[i]
+            };
         }
         let g = params.gyro;
         let all = [
-            BilinearTerm { row: 0, j: 1, k: 2, coeff: dt * g[0] },
-            BilinearTerm { row: 1, j: 0, k: 2, coeff: dt * g[1] },
-            BilinearTerm { row: 2, j: 0, k: 1, coeff: dt * g[2] },
+            BilinearTerm {
+                row: 0,
+                j: 1,
+                k: 2,
+                coeff: dt * g[0],
+            },
+            BilinearTerm {
+                row: 1,
+                j: 0,
+                k: 2,
+                coeff: dt * g[1],
+            },
+            BilinearTerm {
+                row: 2,
+                j: 0,
+                k: 1,
+                coeff: dt * g[2],
+            },
         ];
         let mut terms = all;
         let mut n_terms = 0;
@@ -131,7 +150,14 @@ impl PaperHeli {
                 n_terms += 1;
             }
         }
-        Self { params, dt, phi, zoh, terms, n_terms }
+        Self {
+            params,
+            dt,
+            phi,
+            zoh,
+            terms,
+            n_terms,
+        }
     }
 
     /// Discrete rate-transition factors exp(a dt) (for the controller design).
@@ -161,10 +187,15 @@ impl Model<5, 3> for PaperHeli {
         let dt = self.dt;
         let u_lon_eff = gamma * u[U_LON] + delta;
         SVector::<f64, 5>::new(
-            self.phi[0] * p + self.zoh[0] * (pp.l_lat * u[U_LAT] + pp.trim_moment[0]) + dt * g[0] * q * r,
-            self.phi[1] * q + self.zoh[1] * (pp.m_lon * u_lon_eff + pp.trim_moment[1]) + dt * g[1] * p * r,
+            self.phi[0] * p
+                + self.zoh[0] * (pp.l_lat * u[U_LAT] + pp.trim_moment[0])
+                + dt * g[0] * q * r,
+            self.phi[1] * q
+                + self.zoh[1] * (pp.m_lon * u_lon_eff + pp.trim_moment[1])
+                + dt * g[1] * p * r,
             self.phi[2] * r
-                + self.zoh[2] * (pp.n_ped * u[U_TAIL] + pp.n_col * u[U_COLLECTIVE] + pp.trim_moment[2])
+                + self.zoh[2]
+                    * (pp.n_ped * u[U_TAIL] + pp.n_col * u[U_COLLECTIVE] + pp.trim_moment[2])
                 + dt * g[2] * p * q,
             gamma,
             delta,
@@ -206,7 +237,10 @@ mod tests {
 
     #[test]
     fn jacobian_matches_finite_differences() {
-        let m = PaperHeli::new(PaperHeliParams::xcell60().trimmed_for(&[0.1, 0.0, 0.05, 0.05]), 0.02);
+        let m = PaperHeli::new(
+            PaperHeliParams::xcell60().trimmed_for(&[0.1, 0.0, 0.05, 0.05]),
+            0.02,
+        );
         let z = SVector::<f64, 5>::new(0.3, -0.2, 0.5, 0.8, 0.01);
         let u = [0.1, 0.01, 0.04, 0.06];
         let jac = m.jacobian(&z, &u);
@@ -218,7 +252,12 @@ mod tests {
             zm[j] -= h;
             let col = (m.f(&zp, &u) - m.f(&zm, &u)) / (2.0 * h);
             for i in 0..5 {
-                assert!((col[i] - jac[(i, j)]).abs() < 1e-7, "d f{i}/d z{j}: fd {} vs {}", col[i], jac[(i, j)]);
+                assert!(
+                    (col[i] - jac[(i, j)]).abs() < 1e-7,
+                    "d f{i}/d z{j}: fd {} vs {}",
+                    col[i],
+                    jac[(i, j)]
+                );
             }
         }
     }
@@ -255,6 +294,10 @@ mod tests {
             qr += h * (p.m_q * qr + p.m_lon * (z[3] * u[2] + z[4]));
             rr += h * (p.n_r * rr + p.n_ped * u[3] + p.n_col * u[0]);
         }
-        assert!((next[0] - pr).abs() < 1e-4 && (next[1] - qr).abs() < 1e-4 && (next[2] - rr).abs() < 1e-4);
+        assert!(
+            (next[0] - pr).abs() < 1e-4
+                && (next[1] - qr).abs() < 1e-4
+                && (next[2] - rr).abs() < 1e-4
+        );
     }
 }

@@ -11,9 +11,12 @@ const LEFT: f64 = 70.0;
 const RIGHT: f64 = 150.0;
 const TOP: f64 = 40.0;
 
+/// (estimate, lower bound, upper bound) of one coefficient in a trace.
+type Pick = fn(&Trace) -> (&[f64], &[f64], &[f64]);
+
 struct Panel<'a> {
     title: &'a str,
-    pick: fn(&Trace) -> (&[f64], &[f64], &[f64]),
+    pick: Pick,
 }
 
 fn finite_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -29,7 +32,13 @@ fn finite_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-fn polyline(out: &mut String, t: &[f64], v: &[f64], map: &dyn Fn(f64, f64) -> (f64, f64), style: &str) {
+fn polyline(
+    out: &mut String,
+    t: &[f64],
+    v: &[f64],
+    map: &dyn Fn(f64, f64) -> (f64, f64),
+    style: &str,
+) {
     let mut pts = String::new();
     for (x, y) in t.iter().zip(v) {
         if y.is_finite() {
@@ -42,8 +51,14 @@ fn polyline(out: &mut String, t: &[f64], v: &[f64], map: &dyn Fn(f64, f64) -> (f
 
 pub fn render(run: &Run) -> String {
     let panels = [
-        Panel { title: "gamma_lon", pick: |t| (&t.gamma, &t.gamma_lo, &t.gamma_hi) },
-        Panel { title: "delta_lon (rad)", pick: |t| (&t.delta, &t.delta_lo, &t.delta_hi) },
+        Panel {
+            title: "gamma_lon",
+            pick: |t| (&t.gamma, &t.gamma_lo, &t.gamma_hi),
+        },
+        Panel {
+            title: "delta_lon (rad)",
+            pick: |t| (&t.delta, &t.delta_lo, &t.delta_hi),
+        },
     ];
     let height = TOP + panels.len() as f64 * (PANEL_H + 50.0);
     let mut out = String::new();
@@ -61,7 +76,11 @@ pub fn render(run: &Run) -> String {
         let (truth_v, _, _) = (panel.pick)(&run.truth);
         // Scale on truth and estimates; bounds may be far wider early on, so clip them.
         let (lo, hi) = finite_range(
-            truth_v.iter().copied().chain(run.filters.iter().flat_map(|f| (panel.pick)(&f.trace).0.iter().copied())),
+            truth_v.iter().copied().chain(
+                run.filters
+                    .iter()
+                    .flat_map(|f| (panel.pick)(&f.trace).0.iter().copied()),
+            ),
         );
         let span = hi - lo;
         let (lo, hi) = (lo - 0.5 * span, hi + 0.5 * span);
@@ -101,15 +120,32 @@ pub fn render(run: &Run) -> String {
         for (fi, f) in run.filters.iter().enumerate() {
             let c = COLORS[fi % COLORS.len()];
             let (est, blo, bhi) = (panel.pick)(&f.trace);
-            let bound_style = format!(r#"stroke="{c}" stroke-width="0.8" stroke-dasharray="4 3" opacity="0.6""#);
+            let bound_style =
+                format!(r#"stroke="{c}" stroke-width="0.8" stroke-dasharray="4 3" opacity="0.6""#);
             polyline(&mut out, &f.trace.t, blo, &map, &bound_style);
             polyline(&mut out, &f.trace.t, bhi, &map, &bound_style);
-            polyline(&mut out, &f.trace.t, est, &map, &format!(r#"stroke="{c}" stroke-width="1.5""#));
+            polyline(
+                &mut out,
+                &f.trace.t,
+                est,
+                &map,
+                &format!(r#"stroke="{c}" stroke-width="1.5""#),
+            );
         }
-        polyline(&mut out, &run.truth.t, truth_v, &map, r#"stroke="black" stroke-width="2""#);
+        polyline(
+            &mut out,
+            &run.truth.t,
+            truth_v,
+            &map,
+            r#"stroke="black" stroke-width="2""#,
+        );
         // Legend.
         let lx = LEFT + plot_w + 12.0;
-        let _ = writeln!(out, r#"<text x="{lx}" y="{}" font-weight="bold">truth</text>"#, y0 + 14.0);
+        let _ = writeln!(
+            out,
+            r#"<text x="{lx}" y="{}" font-weight="bold">truth</text>"#,
+            y0 + 14.0
+        );
         for (fi, f) in run.filters.iter().enumerate() {
             let _ = writeln!(
                 out,

@@ -15,8 +15,17 @@ pub fn render(rows: &[Row]) -> String {
     let _ = writeln!(
         out,
         "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10} {:>6} {:>8}",
-        "scenario", "filter", "detect_s", "settle_s", "g_rmse3s", "g_rmse_ss", "d_rmse_ss", "in_bnd%", "in_bnd>1s%",
-        "false", "us/step"
+        "scenario",
+        "filter",
+        "detect_s",
+        "settle_s",
+        "g_rmse3s",
+        "g_rmse_ss",
+        "d_rmse_ss",
+        "in_bnd%",
+        "in_bnd>1s%",
+        "false",
+        "us/step"
     );
     for r in rows {
         let _ = writeln!(

@@ -66,7 +66,11 @@ impl Fault {
             delta += s.amplitude * (s.omega_rad_s * (t - self.t)).sin();
         }
         if let Some(r) = self.ramp {
-            let frac = if r.duration_s > 0.0 { ((t - self.t) / r.duration_s).clamp(0.0, 1.0) } else { 1.0 };
+            let frac = if r.duration_s > 0.0 {
+                ((t - self.t) / r.duration_s).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
             gamma *= 1.0 + frac * (r.gamma - 1.0);
             delta += frac * r.delta;
         }
@@ -79,9 +83,17 @@ impl Fault {
     }
 
     pub fn validate(&self) -> Result<(), String> {
-        let kinds = [self.gamma.is_some() || self.delta.is_some(), self.sine.is_some(), self.ramp.is_some(), self.stuck.is_some()];
+        let kinds = [
+            self.gamma.is_some() || self.delta.is_some(),
+            self.sine.is_some(),
+            self.ramp.is_some(),
+            self.stuck.is_some(),
+        ];
         if kinds.iter().filter(|k| **k).count() == 0 {
-            return Err(format!("fault on `{}` at t = {} sets none of gamma, delta, sine, ramp, stuck", self.actuator, self.t));
+            return Err(format!(
+                "fault on `{}` at t = {} sets none of gamma, delta, sine, ramp, stuck",
+                self.actuator, self.t
+            ));
         }
         let mut nums = vec![("t", self.t)];
         nums.extend(self.until.map(|v| ("until", v)));
@@ -89,14 +101,24 @@ impl Fault {
         nums.extend(self.delta.map(|v| ("delta", v)));
         nums.extend(self.stuck.map(|v| ("stuck", v)));
         if let Some(s) = self.sine {
-            nums.extend([("sine.amplitude", s.amplitude), ("sine.omega_rad_s", s.omega_rad_s)]);
+            nums.extend([
+                ("sine.amplitude", s.amplitude),
+                ("sine.omega_rad_s", s.omega_rad_s),
+            ]);
         }
         if let Some(r) = self.ramp {
-            nums.extend([("ramp.duration_s", r.duration_s), ("ramp.gamma", r.gamma), ("ramp.delta", r.delta)]);
+            nums.extend([
+                ("ramp.duration_s", r.duration_s),
+                ("ramp.gamma", r.gamma),
+                ("ramp.delta", r.delta),
+            ]);
         }
         for (name, v) in nums {
             if !v.is_finite() {
-                return Err(format!("fault on `{}`: {name} is not a finite number ({v})", self.actuator));
+                return Err(format!(
+                    "fault on `{}`: {name} is not a finite number ({v})",
+                    self.actuator
+                ));
             }
         }
         Ok(())
@@ -110,7 +132,7 @@ pub fn health_of(faults: &[Fault], name: &str, t: f64) -> (f64, f64) {
         .iter()
         .filter(|f| f.actuator == name)
         .filter_map(|f| f.health_at(t))
-        .last()
+        .next_back()
         .unwrap_or((1.0, 0.0))
 }
 

@@ -30,7 +30,10 @@ pub struct NoiseSchedule {
 
 impl NoiseSchedule {
     pub fn constant(kind: NoiseKind, level: f64) -> Self {
-        Self { kind, schedule: vec![NoiseStep { t: 0.0, level }] }
+        Self {
+            kind,
+            schedule: vec![NoiseStep { t: 0.0, level }],
+        }
     }
 
     /// The level in force at time t (the first step's level before it starts).
@@ -82,10 +85,16 @@ impl NoiseSchedule {
         let mut last = f64::NEG_INFINITY;
         for s in &self.schedule {
             if !s.t.is_finite() || !s.level.is_finite() {
-                return Err(format!("noise step at t = {} has a non-finite time or level ({})", s.t, s.level));
+                return Err(format!(
+                    "noise step at t = {} has a non-finite time or level ({})",
+                    s.t, s.level
+                ));
             }
             if s.level < 0.0 {
-                return Err(format!("noise level {} at t = {} is negative", s.level, s.t));
+                return Err(format!(
+                    "noise level {} at t = {} is negative",
+                    s.level, s.t
+                ));
             }
             if s.t <= last {
                 return Err("noise schedule times must increase".into());

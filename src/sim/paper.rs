@@ -35,7 +35,12 @@ impl Dither {
             return 0.0;
         }
         let n = self.freqs_hz.len() as f64;
-        self.freqs_hz.iter().map(|f| (std::f64::consts::TAU * f * t).sin()).sum::<f64>() * self.amplitude_rad / n.sqrt()
+        self.freqs_hz
+            .iter()
+            .map(|f| (std::f64::consts::TAU * f * t).sin())
+            .sum::<f64>()
+            * self.amplitude_rad
+            / n.sqrt()
     }
 }
 
@@ -95,7 +100,15 @@ impl PaperSim {
         let u_trim = trim_inputs(cfg.forward_speed);
         let rng = Rng::new(cfg.seed);
         let state = [cfg.forward_speed, 0.0, 0.0, 0.0, 0.0, 0.0];
-        Ok(Self { cfg, model, gain, u_trim, rng, state, k: 0 })
+        Ok(Self {
+            cfg,
+            model,
+            gain,
+            u_trim,
+            rng,
+            state,
+            k: 0,
+        })
     }
 
     pub fn time(&self) -> f64 {
@@ -107,7 +120,14 @@ impl PaperSim {
         let dt = self.cfg.dt;
         let s = self.state;
         let theta_ref = self.cfg.dither.as_ref().map_or(0.0, |d| d.at(t));
-        let err = SVector::<f64, 6>::from([s[0] - self.cfg.forward_speed, s[1], s[2], s[3], s[4], s[5] - theta_ref]);
+        let err = SVector::<f64, 6>::from([
+            s[0] - self.cfg.forward_speed,
+            s[1],
+            s[2],
+            s[3],
+            s[4],
+            s[5] - theta_ref,
+        ]);
         let du = -(self.gain * err);
         let u = [
             self.u_trim[0],
@@ -129,14 +149,27 @@ impl PaperSim {
             *r += self.cfg.process_noise.sample(&mut self.rng, t);
         }
         let speed = s[0] + dt * (X_U * (s[0] - self.cfg.forward_speed) - GRAVITY * s[5]);
-        self.state = [speed, rates[0], rates[1], rates[2], s[4] + dt * s[1], s[5] + dt * s[2]];
+        self.state = [
+            speed,
+            rates[0],
+            rates[1],
+            rates[2],
+            s[4] + dt * s[1],
+            s[5] + dt * s[2],
+        ];
         self.k += 1;
         let t_meas = self.time();
         let mut y = SVector::<f64, 3>::from(rates);
         for v in y.iter_mut() {
             *v += self.cfg.measurement_noise.sample(&mut self.rng, t_meas);
         }
-        PaperSample { t: t_meas, u, y, truth, speed }
+        PaperSample {
+            t: t_meas,
+            u,
+            y,
+            truth,
+            speed,
+        }
     }
 }
 
@@ -163,7 +196,9 @@ fn design_lqr(model: &PaperHeli, dt: f64) -> Option<SMatrix<f64, 3, 6>> {
         0.0,                0.0,                0.0,
         0.0,                0.0,                0.0,
     ]);
-    let q = SMatrix::<f64, 6, 6>::from_diagonal(&SVector::<f64, 6>::from([1.0, 1.0, 1.0, 1.0, 25.0, 25.0]));
+    let q = SMatrix::<f64, 6, 6>::from_diagonal(&SVector::<f64, 6>::from([
+        1.0, 1.0, 1.0, 1.0, 25.0, 25.0,
+    ]));
     let r = SMatrix::<f64, 3, 3>::identity() * 100.0;
     dlqr(&a, &b, &q, &r)
 }
@@ -193,7 +228,11 @@ mod tests {
             last = Some(sim.step());
         }
         let healthy = last.unwrap();
-        assert!((healthy.speed - 10.0).abs() < 0.5, "speed {}", healthy.speed);
+        assert!(
+            (healthy.speed - 10.0).abs() < 0.5,
+            "speed {}",
+            healthy.speed
+        );
         let fault: Fault = toml::from_str("actuator='lon'\nt=10.0\ngamma=0.5").unwrap();
         let mut sim = PaperSim::new(cfg(vec![fault])).unwrap();
         let mut last = None;
@@ -203,7 +242,11 @@ mod tests {
         let faulty = last.unwrap();
         assert_eq!(faulty.truth[ESTIMATED], (0.5, 0.0));
         // The LQR only partly compensates (paper Fig. 6: about 8 m/s).
-        assert!(faulty.speed < healthy.speed - 0.5, "speed after fault {}", faulty.speed);
+        assert!(
+            faulty.speed < healthy.speed - 0.5,
+            "speed after fault {}",
+            faulty.speed
+        );
         assert!(faulty.speed > 5.0, "speed after fault {}", faulty.speed);
     }
 }

@@ -17,7 +17,10 @@ impl Rng {
             x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             x ^ (x >> 31)
         };
-        Self { s: [next(), next(), next(), next()], spare_normal: None }
+        Self {
+            s: [next(), next(), next(), next()],
+            spare_normal: None,
+        }
     }
 
     pub fn next_u64(&mut self) -> u64 {

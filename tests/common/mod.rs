@@ -11,7 +11,11 @@ pub fn python() -> PathBuf {
         return PathBuf::from(p);
     }
     let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
-    if venv.exists() { venv } else { PathBuf::from("python3") }
+    if venv.exists() {
+        venv
+    } else {
+        PathBuf::from("python3")
+    }
 }
 
 /// Run a reference script; a missing interpreter or package fails the test with the fix in the message.
@@ -21,7 +25,12 @@ pub fn run_python(args: &[&str]) {
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}; run `bash .ci/run` once (it creates .venv)", py.display()));
+        .unwrap_or_else(|e| {
+            panic!(
+                "cannot run {}: {e}; run `bash .ci/run` once (it creates .venv)",
+                py.display()
+            )
+        });
     assert!(
         out.status.success(),
         "{} {:?} failed: {}\n(the reference needs filterpy==2.0.0 and numpy: `bash .ci/run` installs them into .venv)",
