@@ -2,6 +2,8 @@
 //! windowed innovation variances. With the gains frozen, vdiag(S_k) is affine in a constant q:
 //! `vdiag(S_k) = H_P q + B_P`, `H_P[j,i] = (H M_i Hᵀ)_jj` from the recursive sensitivity
 //! (the one-step `H_P = H∘H` leaves the AHC entries unobservable), and `B_P = vdiag(S_k) - H_P q_k`.
+//! As in the MIT-UKF, the rate entries are fitted to the innovation spread and the AHC entries
+//! to the innovation mean (two sequential slave updates).
 
 use super::MitUkf;
 use super::mit::{AdaptationParams, InnovationWindow, Sensitivity};
@@ -75,37 +77,43 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, 
         if !self.window.is_full() {
             return Ok(());
         }
+        // The same split as the MIT-UKF (see there): the rate entries explain the spread of the
+        // innovations about their windowed mean, the AHC entries the mean itself.
         let h = self.ukf.model.h_matrix();
-        let mut h_p = SMatrix::<f64, M, N>::zeros();
+        let ahc = self.ukf.model.ahc_start();
+        let mut h_rates = SMatrix::<f64, M, N>::zeros();
+        let mut h_ahc = SMatrix::<f64, M, N>::zeros();
         for i in 0..N {
             let hmh = h * self.sensitivity.m[i] * h.transpose();
             for j in 0..M {
-                h_p[(j, i)] = hmh[(j, j)];
+                if i < ahc {
+                    h_rates[(j, i)] = hmh[(j, j)];
+                } else {
+                    h_ahc[(j, i)] = hmh[(j, j)];
+                }
             }
         }
-        let c_hat = self.window.covariance();
-        let mut resid = SVector::<f64, M>::zeros();
-        let mut r_v = SMatrix::<f64, M, M>::zeros();
+        let q = self.ukf.process_noise;
+        let s_ahc = h_ahc * q;
+        let spread = self.window.centered_covariance();
+        let mu = self.window.mean();
+        let n = self.window.len() as f64;
+        let mut resid_rates = SVector::<f64, M>::zeros();
+        let mut resid_ahc = SVector::<f64, M>::zeros();
+        let mut r_rates = SMatrix::<f64, M, M>::zeros();
+        let mut r_ahc = SMatrix::<f64, M, M>::zeros();
         for j in 0..M {
-            resid[j] = c_hat[(j, j)] - self.ukf.s[(j, j)];
-            // Variance of a sample variance of N Gaussian samples: 2 σ⁴ / N.
-            r_v[(j, j)] = 2.0 * self.ukf.s[(j, j)].powi(2) / self.window.len() as f64;
+            let s_jj = self.ukf.s[(j, j)];
+            // Model: vdiag(spread) = H_rates q + (vdiag(S) - S_ahc - H_rates q); vdiag(μμᵀ) = H_ahc q.
+            resid_rates[j] = spread[(j, j)] - (s_jj - s_ahc[j]);
+            resid_ahc[j] = mu[j] * mu[j] - s_ahc[j];
+            // Variance of a sample variance of N Gaussian samples, 2σ⁴/N, and of a squared mean
+            // of N samples, 2(σ²/N)².
+            r_rates[(j, j)] = 2.0 * s_jj * s_jj / n;
+            r_ahc[(j, j)] = 2.0 * (s_jj / n).powi(2);
         }
-        let s_q = h_p * self.p_q * h_p.transpose() + r_v;
-        let Some(chol) = s_q.cholesky() else {
-            return Ok(()); // slave update skipped; the UKF step itself succeeded
-        };
-        let gain = chol.solve(&(h_p * self.p_q)).transpose();
-        let i_kh = SMatrix::<f64, N, N>::identity() - gain * h_p;
-        self.p_q = i_kh * self.p_q * i_kh.transpose() + gain * r_v * gain.transpose();
-        let dq = gain * resid;
-        for i in 0..N {
-            let q = self.ukf.process_noise[i] + dq[i];
-            self.ukf.process_noise[i] = q.clamp(
-                self.q0[i] * self.adapt.q_min_factor,
-                self.q0[i] * self.adapt.q_max_factor,
-            );
-        }
+        self.slave_update(&h_rates, &resid_rates, &r_rates);
+        self.slave_update(&h_ahc, &resid_ahc, &r_ahc);
         Ok(())
     }
 }
@@ -130,5 +138,31 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<
     }
     fn innovation(&self) -> &SVector<f64, M> {
         &self.ukf.innovation
+    }
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, N, M, S> {
+    /// One linear KF measurement update of the slave filter on q, then projection.
+    fn slave_update(
+        &mut self,
+        h_p: &SMatrix<f64, M, N>,
+        resid: &SVector<f64, M>,
+        r_v: &SMatrix<f64, M, M>,
+    ) {
+        let s_q = h_p * self.p_q * h_p.transpose() + r_v;
+        let Some(chol) = s_q.cholesky() else {
+            return; // slave update skipped; the UKF step itself succeeded
+        };
+        let gain = chol.solve(&(h_p * self.p_q)).transpose();
+        let i_kh = SMatrix::<f64, N, N>::identity() - gain * h_p;
+        self.p_q = i_kh * self.p_q * i_kh.transpose() + gain * r_v * gain.transpose();
+        let dq = gain * resid;
+        for i in 0..N {
+            let q = self.ukf.process_noise[i] + dq[i];
+            self.ukf.process_noise[i] = q.clamp(
+                self.q0[i] * self.adapt.q_min_factor,
+                self.q0[i] * self.adapt.q_max_factor,
+            );
+        }
     }
 }

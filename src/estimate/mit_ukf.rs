@@ -5,9 +5,11 @@
 //! One refinement of ours ([DERIVED], documented in the README): the MIT rule holds Ĉ fixed, so
 //! it cannot see that a larger AHC noise would make the filter *follow* a fault and shrink the
 //! innovations; the cheapest explanation of a fault's large innovations is then always a larger
-//! rate noise. Rate process noise is white and cannot produce an innovation *mean*, so the rate
-//! entries descend `tr[(Ĉ - μμᵀ - S)²]` (the spread about the windowed mean μ) while the AHC
-//! entries descend the paper's `tr[(Ĉ - S)²]`. A noise step moves the spread, a fault the mean.
+//! rate noise. Rate process noise is white and cannot produce an innovation *mean*, while a
+//! lagging AHC estimate shows up as one. So S is split to first order into the AHC part
+//! `S_ahc = Σ_{i ∈ AHC} q_i H M_i Hᵀ` and the rest: the AHC entries descend `tr[(μμᵀ - S_ahc)²]`
+//! (μ: the windowed innovation mean) and the rate entries `tr[(Ĉ - μμᵀ - (S - S_ahc))²]`.
+//! A noise step moves the spread, a fault the mean. Each gradient is still `-2 tr[D H M_i Hᵀ]`.
 
 use super::mit::{AdaptationParams, InnovationWindow, Sensitivity, StepSchedule, gn_step};
 use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
@@ -64,8 +66,15 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.window.push(&self.ukf.innovation);
         self.sensitivity.propagate(&a, self.adapt.forgetting);
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
-        let d_ahc = self.window.covariance() - self.ukf.s;
-        let d_rates = self.window.centered_covariance() - self.ukf.s;
+        // The part of S the AHC noise accounts for (first order, from the sensitivities).
+        let h = self.ukf.model.h_matrix();
+        let mut s_ahc = SMatrix::<f64, M, M>::zeros();
+        for i in self.ukf.model.ahc_start()..N {
+            s_ahc += (h * self.sensitivity.m[i] * h.transpose()) * self.ukf.process_noise[i];
+        }
+        let mu = self.window.mean();
+        let d_ahc = mu * mu.transpose() - s_ahc;
+        let d_rates = self.window.centered_covariance() - (self.ukf.s - s_ahc);
         let (grad, curv) = self.sensitivity.gradient(
             &self.ukf.model.h_matrix(),
             &d_rates,
