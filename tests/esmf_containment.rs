@@ -51,7 +51,7 @@ fn updated_set_contains_every_consistent_point() {
     let truth = m.f(&in_ellipsoid(&mut rng, &x_prev, &l_prev), &u)
         + in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
     let r_inv = f.r.try_inverse().unwrap();
-    let y = m.h(&truth) + SVector::<f64, 3>::from([0.005, -0.004, 0.003]);
+    let y = m.h(&truth, &[]) + SVector::<f64, 3>::from([0.005, -0.004, 0.003]);
     let out = f.try_step(&u, &y).unwrap();
     assert!(out.consistent && out.inflations == 0, "{out:?}");
     let p_inv = f.p.try_inverse().unwrap();
@@ -59,7 +59,7 @@ fn updated_set_contains_every_consistent_point() {
     for _ in 0..4_000_000 {
         let z = m.f(&in_ellipsoid(&mut rng, &x_prev, &l_prev), &u)
             + in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
-        let v = y - m.h(&z);
+        let v = y - m.h(&z, &[]);
         if v.dot(&(r_inv * v)) > 1.0 {
             continue;
         }

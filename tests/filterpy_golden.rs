@@ -100,7 +100,7 @@ fn ukf_equals_linear_kf_on_linear_model() {
     let mut p = SMatrix::<f64, 5, 5>::from_diagonal(&SVector::from(P0_DIAG));
     let q = SMatrix::<f64, 5, 5>::from_diagonal(&SVector::from(Q_DIAG));
     let r = SMatrix::<f64, 3, 3>::identity() * MEAS_VAR;
-    let h = m.h_matrix();
+    let h = m.h_matrix(&[]);
     let mut rng = ahcmon::sim::rng::Rng::new(5);
     let mut truth = x;
     let u_trim = trim_inputs(10.0);

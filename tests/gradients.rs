@@ -74,7 +74,7 @@ fn mit_ukf_one_step_gradient_matches_finite_differences() {
     let mut sens = Sensitivity::<5>::new();
     sens.propagate(&SMatrix::identity(), 1.0); // fresh: M_i = E_ii (P_{k-1} held fixed)
     let d = c - nominal.s;
-    let (g, _) = sens.gradient(&m.h_matrix(), &d, &d, m.ahc_start());
+    let (g, _) = sens.gradient(&m.h_matrix(&[]), &d, &d, m.ahc_start());
     let scale = g.amax();
     for i in 0..5 {
         let h = 1e-4 * q[i];
@@ -110,13 +110,14 @@ fn mit_ukf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
     let mut f = base.clone();
     let mut sens = Sensitivity::<5>::new();
     for s in window {
-        let a = m.jacobian(&f.x, &s.u) * (SMatrix::<f64, 5, 5>::identity() - f.gain * m.h_matrix());
+        let a =
+            m.jacobian(&f.x, &s.u) * (SMatrix::<f64, 5, 5>::identity() - f.gain * m.h_matrix(&[]));
         f.try_step(&s.u, &s.y).unwrap();
         sens.propagate(&a, 1.0);
     }
     let c = f.s * 1.7;
     let d = c - f.s;
-    let (g, _) = sens.gradient(&m.h_matrix(), &d, &d, m.ahc_start());
+    let (g, _) = sens.gradient(&m.h_matrix(&[]), &d, &d, m.ahc_start());
     let scale = g.amax();
     for i in 0..5 {
         let h = 1e-4 * q[i];
@@ -130,7 +131,7 @@ fn mit_ukf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
         };
         let (sp, sm) = (s_of(1.0), s_of(-1.0));
         let ds_fd = (sp - sm) / (2.0 * h);
-        let hmh = m.h_matrix() * sens.m[i] * m.h_matrix().transpose();
+        let hmh = m.h_matrix(&[]) * sens.m[i] * m.h_matrix(&[]).transpose();
         let err_s = (ds_fd - hmh).amax() / hmh.amax();
         let fd = (j_of(&sp, &c) - j_of(&sm, &c)) / (2.0 * h);
         let err = rel_err(g[i], fd, scale);
@@ -184,7 +185,7 @@ fn mit_esmf_one_step_gradient_matches_finite_differences() {
         &nominal.last_p_prev,
         &nominal.last_a,
         m.bilinear_terms(),
-        &m.h_matrix(),
+        &m.h_matrix(&[]),
         &nominal.r,
         nominal.r_sqrt_lmax(),
         &q,
@@ -226,7 +227,7 @@ fn mit_esmf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
         assert!(o.consistent && o.inflations == 0);
         rec.push((f.last_a, f.innovation));
     }
-    let (h, r, rl, q) = (m.h_matrix(), f.r, f.r_sqrt_lmax(), f.process_noise);
+    let (h, r, rl, q) = (m.h_matrix(&[]), f.r, f.r_sqrt_lmax(), f.process_noise);
     let run = |q: &SVector<f64, 5>,
                mut sens: Option<&mut ShapeSensitivity<5>>|
      -> (f64, SVector<f64, 5>) {

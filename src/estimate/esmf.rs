@@ -216,6 +216,8 @@ pub struct Esmf<Mo, const N: usize, const M: usize> {
     /// Counters over the filter's life.
     pub inconsistent_steps: u64,
     pub resets: u64,
+    /// Measurement matrix of the last step.
+    pub h: SMatrix<f64, M, N>,
 }
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
@@ -239,6 +241,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             r_sqrt_lmax: lam.max(0.0).sqrt(),
             last: ShapeStep::zeros(),
             last_a: SMatrix::zeros(),
+            h: SMatrix::zeros(),
             last_p_prev: p0,
             outcome: EsmfOutcome::default(),
             innovation: SVector::zeros(),
@@ -260,7 +263,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         check_inputs(self.model.input_dim(), u, y)?;
         let a = self.model.jacobian(&self.x, u);
         let fx = self.model.f(&self.x, u);
-        let h = self.model.h_matrix();
+        let h = self.model.h_matrix(u);
+        let y = &(y - self.model.h_offset(u));
         let ahc = self.model.ahc_start();
         let mut p_prev = self.p;
         let mut outcome = EsmfOutcome::default();
@@ -314,6 +318,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         self.p = p;
         self.last = st;
         self.last_a = a;
+        self.h = h;
         self.last_p_prev = p_prev;
         self.innovation = e;
         self.outcome = outcome;

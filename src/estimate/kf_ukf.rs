@@ -79,7 +79,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, 
         }
         // The same split as the MIT-UKF (see there): the rate entries explain the spread of the
         // innovations about their windowed mean, the AHC entries the mean itself.
-        let h = self.ukf.model.h_matrix();
+        let h = self.ukf.h;
         let ahc = self.ukf.model.ahc_start();
         let mut h_rates = SMatrix::<f64, M, N>::zeros();
         let mut h_ahc = SMatrix::<f64, M, N>::zeros();

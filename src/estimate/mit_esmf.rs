@@ -190,7 +190,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
             &e.last_p_prev,
             &e.last_a,
             e.model.bilinear_terms(),
-            &e.model.h_matrix(),
+            &e.h,
             &e.r,
             e.r_sqrt_lmax(),
             &e.process_noise,

@@ -55,7 +55,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     /// `A_k = F_k (I - K_{k-1} H)` with F at the previous estimate.
     pub(crate) fn sensitivity_transition(ukf: &Ukf<Mo, N, M, S>, u: &[f64]) -> SMatrix<f64, N, N> {
         let f = ukf.model.jacobian(&ukf.x, u);
-        f * (SMatrix::<f64, N, N>::identity() - ukf.gain * ukf.model.h_matrix())
+        f * (SMatrix::<f64, N, N>::identity() - ukf.gain * ukf.h)
     }
 
     pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
@@ -67,7 +67,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.sensitivity.propagate(&a, self.adapt.forgetting);
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
-        let h = self.ukf.model.h_matrix();
+        let h = self.ukf.h;
         let mut s_ahc = SMatrix::<f64, M, M>::zeros();
         for i in self.ukf.model.ahc_start()..N {
             s_ahc += (h * self.sensitivity.m[i] * h.transpose()) * self.ukf.process_noise[i];
@@ -75,12 +75,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         let mu = self.window.mean();
         let d_ahc = mu * mu.transpose() - s_ahc;
         let d_rates = self.window.centered_covariance() - (self.ukf.s - s_ahc);
-        let (grad, curv) = self.sensitivity.gradient(
-            &self.ukf.model.h_matrix(),
-            &d_rates,
-            &d_ahc,
-            self.ukf.model.ahc_start(),
-        );
+        let (grad, curv) =
+            self.sensitivity
+                .gradient(&h, &d_rates, &d_ahc, self.ukf.model.ahc_start());
         self.gradient = grad;
         // Warm-up: no adaptation until the window is full.
         if self.window.is_full() {

@@ -54,6 +54,10 @@ pub struct Ukf<Mo, const N: usize, const M: usize, const S: usize> {
     pub gain: SMatrix<f64, N, M>,
     pub innovation: SVector<f64, M>,
     pub nis: f64,
+    /// Measurement matrix and offset of the current step (they depend on `u` when `a_z` is
+    /// measured).
+    pub h: SMatrix<f64, M, N>,
+    pub h_offset: SVector<f64, M>,
 }
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N, M, S> {
@@ -66,6 +70,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         r: SMatrix<f64, M, M>,
     ) -> Self {
         assert!(S == 2 * N + 1, "Ukf: S must be 2N+1 (got N={N}, S={S})");
+        let u0 = [0.0; crate::model::MAX_INPUTS];
+        let u0 = &u0[..model.input_dim().min(crate::model::MAX_INPUTS)];
+        let (h, h_offset) = (model.h_matrix(u0), model.h_offset(u0));
         let n = N as f64;
         let lambda = params.alpha * params.alpha * (n + params.kappa) - n;
         let c = n + lambda;
@@ -91,6 +98,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
             gain: SMatrix::zeros(),
             innovation: SVector::zeros(),
             nis: 0.0,
+            h,
+            h_offset,
         }
     }
 
@@ -114,6 +123,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     /// Time update, then redraw the sigma points from the prediction (so Q reaches S).
     pub fn predict(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
         Self::draw_sigmas(&self.x, &self.p, self.sqrt_c, &mut self.sigmas, "predict")?;
+        self.h = self.model.h_matrix(u);
+        self.h_offset = self.model.h_offset(u);
         let mut x = SVector::<f64, N>::zeros();
         for i in 0..S {
             self.sigmas_f[i] = self.model.f(&self.sigmas[i], u);
@@ -137,7 +148,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         let mut y_pred = SVector::<f64, M>::zeros();
         let mut ys = [SVector::<f64, M>::zeros(); S];
         for ((yi, sigma), wm) in ys.iter_mut().zip(&self.sigmas).zip(&self.wm) {
-            *yi = self.model.h(sigma);
+            *yi = self.h * sigma + self.h_offset;
             y_pred += *yi * *wm;
         }
         let mut s = self.r;
@@ -155,8 +166,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         let e = y - y_pred;
         self.nis = e.dot(&s_chol.solve(&e));
         self.x += gain * e;
-        let h = self.model.h_matrix();
-        let i_kh = SMatrix::<f64, N, N>::identity() - gain * h;
+        let i_kh = SMatrix::<f64, N, N>::identity() - gain * self.h;
         let mut p = i_kh * self.p * i_kh.transpose() + gain * self.r * gain.transpose();
         symmetrize(&mut p);
         for i in self.model.ahc_start()..N {
@@ -174,11 +184,13 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     /// One full step. On error the state is left as it was before the step.
     pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
         check_inputs(self.model.input_dim(), u, y)?;
-        let (x0, p0) = (self.x, self.p);
+        let (x0, p0, h0, o0) = (self.x, self.p, self.h, self.h_offset);
         let r = self.predict(u).and_then(|_| self.update(y));
         if r.is_err() {
             self.x = x0;
             self.p = p0;
+            self.h = h0;
+            self.h_offset = o0;
         }
         r
     }

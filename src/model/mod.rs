@@ -7,8 +7,13 @@
 //! constant Hessian), so the trait exposes those terms explicitly.
 
 mod paper_heli;
+mod rate;
 
 pub use paper_heli::{PaperHeli, PaperHeliParams};
+pub use rate::{MAX_ACTUATORS, RateModel, RateModelError, RateParams};
+
+/// Longest input vector any model takes.
+pub const MAX_INPUTS: usize = MAX_ACTUATORS;
 
 use nalgebra::{SMatrix, SVector};
 
@@ -31,14 +36,19 @@ pub trait Model<const N: usize, const M: usize> {
     fn f(&self, z: &SVector<f64, N>, u: &[f64]) -> SVector<f64, N>;
     /// `df/dz` at `(z, u)`.
     fn jacobian(&self, z: &SVector<f64, N>, u: &[f64]) -> SMatrix<f64, N, N>;
-    /// The measurement matrix: measurements are linear in the state (gyro rates).
-    fn h_matrix(&self) -> SMatrix<f64, M, N>;
+    /// The measurement matrix for input `u`: measurements are affine in the state for a known
+    /// input (gyro rates; a vertical specific force that depends on `gamma * u + delta`).
+    fn h_matrix(&self, u: &[f64]) -> SMatrix<f64, M, N>;
+    /// The measurement's offset for input `u` (a trim specific force); zero by default.
+    fn h_offset(&self, _u: &[f64]) -> SVector<f64, M> {
+        SVector::zeros()
+    }
     /// The bilinear terms of `f` (empty for a linear model). Their Hessian is constant.
     fn bilinear_terms(&self) -> &[BilinearTerm];
     /// Index of the first AHC in the state; AHCs occupy `ahc_start()..N`.
     fn ahc_start(&self) -> usize;
     /// Measurement function.
-    fn h(&self, z: &SVector<f64, N>) -> SVector<f64, M> {
-        self.h_matrix() * z
+    fn h(&self, z: &SVector<f64, N>, u: &[f64]) -> SVector<f64, M> {
+        self.h_matrix(u) * z + self.h_offset(u)
     }
 }

@@ -218,7 +218,7 @@ impl Model<5, 3> for PaperHeli {
         jac
     }
 
-    fn h_matrix(&self) -> SMatrix<f64, 3, 5> {
+    fn h_matrix(&self, _u: &[f64]) -> SMatrix<f64, 3, 5> {
         SMatrix::<f64, 3, 5>::identity()
     }
 

@@ -1,0 +1,534 @@
+//! Vehicle profiles (TOML, `replay/profiles/`): which outputs are actuators, how their PWM is
+//! normalised, and the rate-effectiveness model (`D`, `G`, `c`) with its noise levels.
+//!
+//! `G` comes either from geometry (multirotor arm angle and spin, swashplate servo angle, plane
+//! surface) times the vehicle's axis gains, or from an explicit `effectiveness` column.
+
+use crate::model::{MAX_ACTUATORS, RateParams};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use thiserror::Error;
+
+/// What an actuator is; decides the normalisation and the geometry of its `G` column.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    Motor,
+    Throttle,
+    Swash,
+    Tail,
+    Aileron,
+    Elevator,
+    Rudder,
+    /// Any other output; needs an explicit `effectiveness` column.
+    Custom,
+}
+
+impl Role {
+    /// Range outputs (motors, throttle) are normalised from PWM min to [0, 1]; angle outputs
+    /// about their trim to [-1, 1].
+    pub fn is_range(self) -> bool {
+        matches!(self, Role::Motor | Role::Throttle)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Spin {
+    Cw,
+    Ccw,
+}
+
+/// One actuator as written in the profile file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ActuatorSpec {
+    pub name: String,
+    /// 1-based output number as in SERVO_OUTPUT_RAW / `SERVOn_*`.
+    pub channel: u8,
+    pub role: Role,
+    #[serde(default = "pwm_min")]
+    pub pwm_min: f64,
+    #[serde(default = "pwm_trim")]
+    pub pwm_trim: f64,
+    #[serde(default = "pwm_max")]
+    pub pwm_max: f64,
+    #[serde(default)]
+    pub reversed: bool,
+    /// Motor: arm angle from the nose, clockwise seen from above (deg). Swash: servo position.
+    #[serde(default)]
+    pub angle_deg: Option<f64>,
+    /// Motor spin direction seen from above.
+    #[serde(default)]
+    pub spin: Option<Spin>,
+    /// Explicit `G` column `[roll, pitch, yaw]` (rad/s² per unit), overriding the geometry.
+    #[serde(default)]
+    pub effectiveness: Option<[f64; 3]>,
+    /// Explicit vertical specific force per unit (m/s²), overriding the geometry.
+    #[serde(default)]
+    pub vertical: Option<f64>,
+}
+
+fn pwm_min() -> f64 {
+    1000.0
+}
+fn pwm_trim() -> f64 {
+    1500.0
+}
+fn pwm_max() -> f64 {
+    2000.0
+}
+
+/// The model part of a profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSpec {
+    /// Diagonal damping `D` of p, q, r (1/s).
+    pub damping: [f64; 3],
+    /// Trim offset `c` of the rate rows (rad/s²).
+    #[serde(default)]
+    pub offset: [f64; 3],
+    /// Trim offset of the vertical specific force (m/s²).
+    #[serde(default)]
+    pub vertical_offset: f64,
+    /// Axis gains the geometry is scaled by (rad/s² per unit of command).
+    #[serde(default)]
+    pub roll_gain: f64,
+    #[serde(default)]
+    pub pitch_gain: f64,
+    #[serde(default)]
+    pub yaw_gain: f64,
+    /// Motors: vertical specific force per unit per motor; swash: for all three servos together.
+    #[serde(default)]
+    pub thrust_gain: f64,
+    /// Swash: yaw acceleration per unit of collective (main-rotor torque), all servos together.
+    #[serde(default)]
+    pub collective_yaw: f64,
+    /// Measure vertical specific force `a_z` as a fourth output.
+    #[serde(default)]
+    pub measure_az: bool,
+}
+
+/// Noise levels the filters are set up with (standard deviations).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseSpec {
+    /// Gyro noise (rad/s).
+    pub gyro: f64,
+    /// Vertical specific force noise (m/s²).
+    #[serde(default = "az_noise")]
+    pub az: f64,
+    /// Rate process noise per step at the profile's rate (rad/s): gusts and model error.
+    pub rate_process: f64,
+    /// Random-walk noise per step of gamma and delta.
+    pub gamma_process: f64,
+    pub delta_process: f64,
+}
+
+fn az_noise() -> f64 {
+    0.3
+}
+
+/// A vehicle profile file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// `helicopter` | `multirotor` | `plane`.
+    pub vehicle: VehicleKind,
+    /// Telemetry rate the noise levels refer to (Hz).
+    pub rate_hz: f64,
+    pub model: ModelSpec,
+    pub noise: NoiseSpec,
+    #[serde(rename = "actuator")]
+    pub actuators: Vec<ActuatorSpec>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VehicleKind {
+    Helicopter,
+    Multirotor,
+    Plane,
+}
+
+#[derive(Debug, Error)]
+pub enum ProfileError {
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}: {message}")]
+    Parse {
+        path: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: String, message: String },
+    #[error("no profile file or built-in profile named `{name}` (built-in: {builtin})")]
+    NotFound { name: String, builtin: String },
+}
+
+/// The profiles shipped in `replay/profiles/`.
+pub const BUILTIN: &[(&str, &str)] = &[
+    (
+        "paper-heli",
+        include_str!("../../replay/profiles/paper-heli.toml"),
+    ),
+    (
+        "heli-h3-120",
+        include_str!("../../replay/profiles/heli-h3-120.toml"),
+    ),
+    (
+        "quad-plus",
+        include_str!("../../replay/profiles/quad-plus.toml"),
+    ),
+    ("quad-x", include_str!("../../replay/profiles/quad-x.toml")),
+    ("hexa-x", include_str!("../../replay/profiles/hexa-x.toml")),
+    ("plane", include_str!("../../replay/profiles/plane.toml")),
+];
+
+/// Line (1-based) of a TOML error's span.
+pub(crate) fn toml_error_line(text: &str, e: &toml::de::Error) -> usize {
+    e.span().map_or(0, |s| {
+        text[..s.start.min(text.len())].matches('\n').count() + 1
+    })
+}
+
+impl Profile {
+    /// Parse and validate TOML text; `path` names the source in errors.
+    pub fn from_toml(text: &str, path: &str) -> Result<Self, ProfileError> {
+        let p: Profile = toml::from_str(text).map_err(|e| ProfileError::Parse {
+            path: path.to_string(),
+            line: toml_error_line(text, &e),
+            message: e.message().trim().replace('\n', " "),
+        })?;
+        p.validate().map_err(|message| ProfileError::Invalid {
+            path: path.to_string(),
+            message,
+        })?;
+        Ok(p)
+    }
+
+    /// A built-in profile by name, or a profile file by path.
+    pub fn resolve(name_or_path: &str) -> Result<Self, ProfileError> {
+        if let Some((stem, text)) = BUILTIN.iter().find(|(s, _)| *s == name_or_path) {
+            return Self::from_toml(text, &format!("replay/profiles/{stem}.toml"));
+        }
+        let path = Path::new(name_or_path);
+        if path.exists() || name_or_path.ends_with(".toml") || name_or_path.contains('/') {
+            let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+                path: name_or_path.to_string(),
+                source,
+            })?;
+            return Self::from_toml(&text, name_or_path);
+        }
+        Err(ProfileError::NotFound {
+            name: name_or_path.to_string(),
+            builtin: BUILTIN
+                .iter()
+                .map(|(s, _)| *s)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+    }
+
+    pub fn actuator_names(&self) -> Vec<String> {
+        self.actuators.iter().map(|a| a.name.clone()).collect()
+    }
+
+    pub fn actuator_index(&self, name: &str) -> Option<usize> {
+        self.actuators.iter().position(|a| a.name == name)
+    }
+
+    /// Number of measurements (3 gyro rates, plus `a_z`).
+    pub fn measurements(&self) -> usize {
+        if self.model.measure_az { 4 } else { 3 }
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        let l = self.actuators.len();
+        if l == 0 || l > MAX_ACTUATORS {
+            return Err(format!(
+                "{l} actuators; between 1 and {MAX_ACTUATORS} are supported"
+            ));
+        }
+        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
+            return Err(format!("rate_hz must be positive (got {})", self.rate_hz));
+        }
+        let m = &self.model;
+        let numbers = m
+            .damping
+            .iter()
+            .chain(&m.offset)
+            .chain(&[
+                m.vertical_offset,
+                m.roll_gain,
+                m.pitch_gain,
+                m.yaw_gain,
+                m.thrust_gain,
+                m.collective_yaw,
+            ])
+            .all(|v| v.is_finite());
+        if !numbers || m.damping.iter().any(|d| *d < 0.0) {
+            return Err("model: numbers must be finite and damping non-negative".into());
+        }
+        let n = &self.noise;
+        for (k, v) in [
+            ("gyro", n.gyro),
+            ("az", n.az),
+            ("rate_process", n.rate_process),
+            ("gamma_process", n.gamma_process),
+            ("delta_process", n.delta_process),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("noise.{k} must be positive (got {v})"));
+            }
+        }
+        let mut seen = std::collections::HashSet::new();
+        for a in &self.actuators {
+            if !seen.insert(a.channel) {
+                return Err(format!(
+                    "actuator `{}`: channel {} used twice",
+                    a.name, a.channel
+                ));
+            }
+            if a.channel == 0 || a.channel > 32 {
+                return Err(format!("actuator `{}`: channel must be 1..32", a.name));
+            }
+            if !(a.pwm_min < a.pwm_max) || !(a.pwm_min.is_finite() && a.pwm_max.is_finite()) {
+                return Err(format!(
+                    "actuator `{}`: pwm_min must be below pwm_max",
+                    a.name
+                ));
+            }
+            if !a.role.is_range() && !(a.pwm_min < a.pwm_trim && a.pwm_trim < a.pwm_max) {
+                return Err(format!(
+                    "actuator `{}`: pwm_trim must lie between pwm_min and pwm_max",
+                    a.name
+                ));
+            }
+            if a.effectiveness.is_none() {
+                match a.role {
+                    Role::Motor if a.angle_deg.is_none() || a.spin.is_none() => {
+                        return Err(format!(
+                            "motor `{}` needs angle_deg and spin (or an explicit effectiveness)",
+                            a.name
+                        ));
+                    }
+                    Role::Swash if a.angle_deg.is_none() => {
+                        return Err(format!(
+                            "swash servo `{}` needs angle_deg (or an explicit effectiveness)",
+                            a.name
+                        ));
+                    }
+                    Role::Custom | Role::Throttle => {
+                        return Err(format!(
+                            "actuator `{}` ({:?}) needs an explicit effectiveness",
+                            a.name, a.role
+                        ));
+                    }
+                    _ => {}
+                }
+            }
+        }
+        if self
+            .actuators
+            .iter()
+            .filter(|a| a.role == Role::Swash)
+            .count()
+            == 1
+        {
+            return Err("a swashplate needs at least two servos".into());
+        }
+        Ok(())
+    }
+
+    /// The `G` column and vertical effectiveness of actuator `j` (geometry or explicit).
+    pub fn column(&self, j: usize) -> ([f64; 3], f64) {
+        let a = &self.actuators[j];
+        let m = &self.model;
+        let swash = self
+            .actuators
+            .iter()
+            .filter(|a| a.role == Role::Swash)
+            .count()
+            .max(1) as f64;
+        let (ang_s, ang_c) = a.angle_deg.unwrap_or(0.0).to_radians().sin_cos();
+        // Geometry. FRD body axes: a motor (or raised swash side) on the right rolls the
+        // vehicle left (negative p), one in front pitches it nose up; a CCW propeller's
+        // reaction torque yaws the body clockwise (ArduPilot yaw factor +1).
+        let (col, vertical) = match a.role {
+            Role::Motor => {
+                let yaw = match a.spin {
+                    Some(Spin::Ccw) => m.yaw_gain,
+                    _ => -m.yaw_gain,
+                };
+                (
+                    [-ang_s * m.roll_gain, ang_c * m.pitch_gain, yaw],
+                    -m.thrust_gain,
+                )
+            }
+            Role::Swash => (
+                [
+                    -ang_s * m.roll_gain,
+                    ang_c * m.pitch_gain,
+                    m.collective_yaw / swash,
+                ],
+                -m.thrust_gain / swash,
+            ),
+            Role::Tail | Role::Rudder => ([0.0, 0.0, m.yaw_gain], 0.0),
+            Role::Aileron => ([m.roll_gain, 0.0, 0.0], 0.0),
+            Role::Elevator => ([0.0, m.pitch_gain, 0.0], 0.0),
+            Role::Throttle | Role::Custom => ([0.0; 3], 0.0),
+        };
+        (
+            a.effectiveness.unwrap_or(col),
+            a.vertical.unwrap_or(vertical),
+        )
+    }
+
+    /// The continuous rate-effectiveness parameters.
+    pub fn rate_params(&self) -> RateParams {
+        let cols: Vec<_> = (0..self.actuators.len()).map(|j| self.column(j)).collect();
+        RateParams {
+            damping: self.model.damping,
+            effectiveness: cols.iter().map(|c| c.0).collect(),
+            vertical: cols.iter().map(|c| c.1).collect(),
+            offset: self.model.offset,
+            vertical_offset: self.model.vertical_offset,
+        }
+    }
+
+    /// Replace `D`, `G` (as explicit columns) and `c` by identified values.
+    pub fn with_rate_params(&self, p: &RateParams) -> Self {
+        let mut out = self.clone();
+        out.model.damping = p.damping;
+        out.model.offset = p.offset;
+        out.model.vertical_offset = p.vertical_offset;
+        for (j, a) in out.actuators.iter_mut().enumerate() {
+            a.effectiveness = Some(p.effectiveness[j]);
+            if let Some(v) = p.vertical.get(j) {
+                a.vertical = Some(*v);
+            }
+        }
+        out
+    }
+
+    /// Normalised command of actuator `j` from its PWM (µs).
+    pub fn normalise(&self, j: usize, pwm: f64) -> f64 {
+        normalise(&self.actuators[j], pwm)
+    }
+
+    /// PWM (µs) of actuator `j` for a normalised command (the simulators' inverse).
+    pub fn to_pwm(&self, j: usize, u: f64) -> f64 {
+        let a = &self.actuators[j];
+        let u = if a.reversed && !a.role.is_range() {
+            -u
+        } else if a.reversed {
+            1.0 - u
+        } else {
+            u
+        };
+        if a.role.is_range() {
+            a.pwm_min + u * (a.pwm_max - a.pwm_min)
+        } else if u >= 0.0 {
+            a.pwm_trim + u * (a.pwm_max - a.pwm_trim)
+        } else {
+            a.pwm_trim + u * (a.pwm_trim - a.pwm_min)
+        }
+    }
+
+    /// Command range of actuator `j` in normalised units.
+    pub fn command_range(&self, j: usize) -> (f64, f64) {
+        if self.actuators[j].role.is_range() {
+            (0.0, 1.0)
+        } else {
+            (-1.0, 1.0)
+        }
+    }
+}
+
+/// Range outputs: `(pwm - min) / (max - min)`; angle outputs: about trim, each side scaled to
+/// its own half-range. Never about the flight trim: a gain fault must stay a gain.
+pub fn normalise(a: &ActuatorSpec, pwm: f64) -> f64 {
+    let u = if a.role.is_range() {
+        (pwm - a.pwm_min) / (a.pwm_max - a.pwm_min)
+    } else if pwm >= a.pwm_trim {
+        (pwm - a.pwm_trim) / (a.pwm_max - a.pwm_trim)
+    } else {
+        (pwm - a.pwm_trim) / (a.pwm_trim - a.pwm_min)
+    };
+    match (a.reversed, a.role.is_range()) {
+        (false, _) => u,
+        (true, false) => -u,
+        (true, true) => 1.0 - u,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_profiles_parse() {
+        for (name, _) in BUILTIN {
+            let p = Profile::resolve(name).unwrap();
+            assert_eq!(&p.name, name);
+            let rp = p.rate_params();
+            assert_eq!(rp.actuators(), p.actuators.len());
+        }
+    }
+
+    #[test]
+    fn quad_x_follows_ardupilot_motor_order() {
+        let p = Profile::resolve("quad-x").unwrap();
+        // Motor 1 front right CCW, 2 back left CCW, 3 front left CW, 4 back right CW.
+        let sign = |v: f64| v.signum() as i32;
+        let expect = [[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, -1]];
+        for (j, e) in expect.iter().enumerate() {
+            let (c, v) = p.column(j);
+            assert_eq!([sign(c[0]), sign(c[1]), sign(c[2])], *e, "motor {}", j + 1);
+            assert!(v < 0.0);
+            assert_eq!(p.actuators[j].channel as usize, j + 1);
+        }
+    }
+
+    #[test]
+    fn normalisation_round_trips_and_respects_kind() {
+        let p = Profile::resolve("heli-h3-120").unwrap();
+        for j in 0..p.actuators.len() {
+            for u in [-1.0, -0.3, 0.0, 0.4, 1.0] {
+                let back = p.normalise(j, p.to_pwm(j, u));
+                assert!((back - u).abs() < 1e-12);
+            }
+        }
+        let q = Profile::resolve("quad-x").unwrap();
+        assert_eq!(q.normalise(0, 1000.0), 0.0);
+        assert_eq!(q.normalise(0, 2000.0), 1.0);
+        assert_eq!(q.normalise(0, 1500.0), 0.5);
+    }
+
+    #[test]
+    fn unknown_key_names_file_line_and_key() {
+        let text = include_str!("../../replay/profiles/quad-x.toml")
+            .replace("[noise]", "[noise]\nwobble = 3");
+        let e = Profile::from_toml(&text, "x.toml").unwrap_err().to_string();
+        assert!(e.starts_with("x.toml:"), "{e}");
+        assert!(e.contains("wobble"), "{e}");
+        let line: usize = e.split(':').nth(1).unwrap().parse().unwrap();
+        assert!(line > 1);
+    }
+
+    #[test]
+    fn missing_file_is_a_clear_error() {
+        let e = Profile::resolve("/no/such/profile.toml").unwrap_err();
+        assert!(e.to_string().contains("cannot read"), "{e}");
+        let e = Profile::resolve("octo-z").unwrap_err();
+        assert!(e.to_string().contains("quad-x"), "{e}");
+    }
+}
