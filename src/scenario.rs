@@ -4,6 +4,8 @@
 use crate::sim::fault::Fault;
 use crate::sim::noise::NoiseSchedule;
 use crate::sim::paper::{ACTUATORS, Dither};
+use crate::sim::vehicle::{AttitudeDither, Gusts, Manoeuvre, ModelMismatch};
+use crate::telemetry::Profile;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use thiserror::Error;
@@ -13,16 +15,36 @@ use thiserror::Error;
 pub struct Scenario {
     #[serde(default)]
     pub description: String,
-    /// Vehicle model; this build simulates `paper-heli`.
+    /// `paper-heli` (the paper's simulation) or a vehicle profile (built-in name or file) that
+    /// the vehicle simulator flies.
     pub vehicle: String,
+    /// The monitor's profile when it differs from the simulated vehicle's (default: the same).
+    #[serde(default)]
+    pub profile: Option<String>,
     pub duration_s: f64,
     pub rate_hz: f64,
     #[serde(default = "default_seed")]
     pub seed: u64,
     #[serde(default = "default_speed")]
     pub forward_speed_mps: f64,
+    /// Paper scenarios: rate process and gyro noise schedules (required there).
+    #[serde(default = "quiet")]
     pub process_noise: NoiseSchedule,
+    #[serde(default = "quiet")]
     pub measurement_noise: NoiseSchedule,
+    /// Vehicle scenarios: gyro (rad/s) and a_z (m/s²) noise std; default: the profile's.
+    #[serde(default)]
+    pub gyro_noise: Option<f64>,
+    #[serde(default)]
+    pub az_noise: Option<f64>,
+    #[serde(default)]
+    pub gusts: Option<Gusts>,
+    #[serde(default)]
+    pub model_mismatch: Option<ModelMismatch>,
+    #[serde(default)]
+    pub attitude_dither: Option<AttitudeDither>,
+    #[serde(default, rename = "manoeuvre")]
+    pub manoeuvres: Vec<Manoeuvre>,
     #[serde(default)]
     pub dither: Option<Dither>,
     #[serde(default, rename = "fault")]
@@ -57,6 +79,10 @@ impl Default for EvalSettings {
             steady_fraction: 0.25,
         }
     }
+}
+
+fn quiet() -> NoiseSchedule {
+    NoiseSchedule::constant(crate::sim::noise::NoiseKind::Gaussian, 0.0)
 }
 
 fn default_seed() -> u64 {
@@ -116,6 +142,58 @@ pub const BUILTIN: &[(&str, &str)] = &[
         "healthy-10min",
         include_str!("../replay/scenarios/healthy-10min.toml"),
     ),
+    (
+        "quad-x-motor2-loe",
+        include_str!("../replay/scenarios/quad-x-motor2-loe.toml"),
+    ),
+    (
+        "quad-x-motor4-bias",
+        include_str!("../replay/scenarios/quad-x-motor4-bias.toml"),
+    ),
+    (
+        "quad-x-healthy-gusts",
+        include_str!("../replay/scenarios/quad-x-healthy-gusts.toml"),
+    ),
+    (
+        "quad-x-hover-still",
+        include_str!("../replay/scenarios/quad-x-hover-still.toml"),
+    ),
+    (
+        "hexa-x-motor3-loe",
+        include_str!("../replay/scenarios/hexa-x-motor3-loe.toml"),
+    ),
+    (
+        "hexa-x-motor5-stuck",
+        include_str!("../replay/scenarios/hexa-x-motor5-stuck.toml"),
+    ),
+    (
+        "hexa-x-healthy-gusts",
+        include_str!("../replay/scenarios/hexa-x-healthy-gusts.toml"),
+    ),
+    (
+        "heli-swash2-loe",
+        include_str!("../replay/scenarios/heli-swash2-loe.toml"),
+    ),
+    (
+        "heli-tail-bias",
+        include_str!("../replay/scenarios/heli-tail-bias.toml"),
+    ),
+    (
+        "heli-healthy-gusts",
+        include_str!("../replay/scenarios/heli-healthy-gusts.toml"),
+    ),
+    (
+        "plane-elevator-loe",
+        include_str!("../replay/scenarios/plane-elevator-loe.toml"),
+    ),
+    (
+        "plane-aileron-bias",
+        include_str!("../replay/scenarios/plane-aileron-bias.toml"),
+    ),
+    (
+        "plane-healthy-gusts",
+        include_str!("../replay/scenarios/plane-healthy-gusts.toml"),
+    ),
 ];
 
 /// A scenario with the name it is reported under (the file stem).
@@ -145,6 +223,11 @@ impl Scenario {
         Ok(scn)
     }
 
+    /// The paper's simulation rather than a vehicle profile.
+    pub fn is_paper(&self) -> bool {
+        self.vehicle == "paper-heli"
+    }
+
     pub fn dt(&self) -> f64 {
         1.0 / self.rate_hz
     }
@@ -159,11 +242,38 @@ impl Scenario {
     }
 
     fn validate(&self) -> Result<(), String> {
-        if self.vehicle != "paper-heli" {
-            return Err(format!(
-                "vehicle `{}` cannot be simulated by this build (known: paper-heli)",
-                self.vehicle
-            ));
+        let actuators: Vec<String> = if self.is_paper() {
+            ACTUATORS.iter().map(|s| s.to_string()).collect()
+        } else {
+            let p = Profile::resolve(&self.vehicle).map_err(|e| format!("vehicle: {e}"))?;
+            if let Some(name) = &self.profile {
+                let m = Profile::resolve(name).map_err(|e| format!("profile: {e}"))?;
+                if m.actuator_names() != p.actuator_names() {
+                    return Err("profile: its actuators differ from the vehicle's".into());
+                }
+            }
+            p.actuator_names()
+        };
+        for (name, v) in [("gyro_noise", self.gyro_noise), ("az_noise", self.az_noise)] {
+            if v.is_some_and(|v| !v.is_finite() || v < 0.0) {
+                return Err(format!("{name} must be a finite non-negative number"));
+            }
+        }
+        if let Some(g) = &self.gusts
+            && (!g.tau_s.is_finite()
+                || g.tau_s <= 0.0
+                || !g.vertical.is_finite()
+                || g.angular.iter().any(|v| !v.is_finite() || *v < 0.0))
+        {
+            return Err("gusts: finite non-negative levels and a positive tau_s".into());
+        }
+        if let Some(m) = &self.model_mismatch
+            && !(m.damping.is_finite()
+                && m.damping > 0.0
+                && m.effectiveness.is_finite()
+                && m.effectiveness > 0.0)
+        {
+            return Err("model_mismatch: scales must be positive".into());
         }
         for (name, v) in [
             ("duration_s", self.duration_s),
@@ -197,11 +307,11 @@ impl Scenario {
             return Err("dither: amplitude and frequencies must be finite".into());
         }
         for f in &self.faults {
-            if !ACTUATORS.contains(&f.actuator.as_str()) {
+            if !actuators.contains(&f.actuator) {
                 return Err(format!(
                     "fault actuator `{}` is not one of {}",
                     f.actuator,
-                    ACTUATORS.join(", ")
+                    actuators.join(", ")
                 ));
             }
             f.validate()?;

@@ -3,6 +3,8 @@
 //! filter's bounds for a persistence time, and cleared after it has been back inside for a
 //! hold-off time (hysteresis).
 
+pub mod vehicle;
+
 /// A decision event of the bounds rule.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BoundsEvent {

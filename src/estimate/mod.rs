@@ -9,6 +9,7 @@ mod mit;
 mod mit_esmf;
 mod mit_ukf;
 mod ukf;
+pub mod vehicle;
 
 pub use esmf::{Esmf, EsmfOutcome, EsmfParams, ShapeStep, remainder_box, scale_block, shape_step};
 pub use kf_ukf::{KfUkf, SlaveKfParams};

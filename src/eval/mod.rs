@@ -2,6 +2,7 @@
 //! scored against the simulator's truth. Pure: printing and plotting live in `output/`.
 
 pub mod bank;
+pub mod vehicle;
 
 use crate::diagnose::{BoundsDetector, BoundsEvent};
 use crate::scenario::{NamedScenario, Scenario};
@@ -53,6 +54,13 @@ pub struct Metrics {
     pub us_per_step: f64,
     /// Steps the filter rejected with an error (state kept).
     pub step_errors: u64,
+    /// Fault scenarios: the right actuator isolated within 2 s of onset and no wrong fault
+    /// decision; None for a healthy flight.
+    pub isolated_correct: Option<bool>,
+    /// Class of the decision in force 5 s after onset (vehicle scenarios).
+    pub class: Option<String>,
+    /// `excitation_low` decisions.
+    pub excitation_low: u32,
 }
 
 #[derive(Debug, Clone)]
@@ -67,6 +75,7 @@ pub struct FilterRun {
 #[derive(Debug, Clone)]
 pub struct Run {
     pub scenario: String,
+    pub vehicle: String,
     pub seed: u64,
     pub truth: Trace,
     pub filters: Vec<FilterRun>,
@@ -99,6 +108,9 @@ struct Accum {
 /// Run one scenario with one seed through the sim and the whole filter bank.
 pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Result<Run, EvalError> {
     let scn: &Scenario = &named.scenario;
+    if !scn.is_paper() {
+        return vehicle::run_vehicle_scenario(named, seed, keep_traces, &mut vehicle::NoSink);
+    }
     let settings = scn.eval;
     let dt = scn.dt();
     let cfg = PaperSimConfig {
@@ -248,6 +260,9 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
                     false_decisions: a.false_decisions,
                     us_per_step: a.nanos as f64 / 1e3 / a.steps.max(1) as f64,
                     step_errors: a.errors,
+                    isolated_correct: onset.map(|_| a.first_detection.is_some()),
+                    class: None,
+                    excitation_low: 0,
                 },
                 trace: a.trace,
                 decisions: a.decisions,
@@ -256,6 +271,7 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
         .collect();
     Ok(Run {
         scenario: named.name.clone(),
+        vehicle: scn.vehicle.clone(),
         seed,
         truth,
         filters,
@@ -267,7 +283,13 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
     pub scenario: String,
+    pub vehicle: String,
     pub filter: String,
+    /// True when every seed isolated the right actuator (null for a healthy flight).
+    pub isolated_correct: Option<bool>,
+    /// The class every seed reported, or the classes joined by `|` when seeds differ.
+    pub class: Option<String>,
+    pub excitation_low: u32,
     /// Worst over seeds; null when some seed never detected the fault (or there is none).
     pub detection_delay_s: Option<f64>,
     /// Worst over seeds; null when some seed never settled.
@@ -303,7 +325,28 @@ pub fn aggregate(runs: &[Run]) -> Vec<Row> {
             let mean = |f: &dyn Fn(&Metrics) -> f64| ms.iter().map(|m| f(m)).sum::<f64>() / n;
             Row {
                 scenario: first.scenario.clone(),
+                vehicle: first.vehicle.clone(),
                 filter: first.filters[i].filter.to_string(),
+                isolated_correct: ms
+                    .iter()
+                    .map(|m| m.isolated_correct)
+                    .collect::<Option<Vec<bool>>>()
+                    .map(|v| v.iter().all(|b| *b)),
+                class: {
+                    let mut classes: Vec<String> = Vec::new();
+                    for m in &ms {
+                        let c = m.class.clone().unwrap_or_else(|| "none".into());
+                        if !classes.contains(&c) {
+                            classes.push(c);
+                        }
+                    }
+                    if classes == ["none"] {
+                        None
+                    } else {
+                        Some(classes.join("|"))
+                    }
+                },
+                excitation_low: ms.iter().map(|m| m.excitation_low).sum(),
                 detection_delay_s: worst(&|m| m.detection_delay_s),
                 settle_s: worst(&|m| m.settle_s),
                 gamma_rmse_3s: ms

@@ -14,7 +14,7 @@ pub fn render(rows: &[Row]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10} {:>6} {:>8}",
+        "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10} {:>6} {:>8} {:>4} {:<22}",
         "scenario",
         "filter",
         "detect_s",
@@ -25,12 +25,14 @@ pub fn render(rows: &[Row]) -> String {
         "in_bnd%",
         "in_bnd>1s%",
         "false",
-        "us/step"
+        "us/step",
+        "iso",
+        "class"
     );
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10.4} {:>10.5} {:>9.2} {:>10.2} {:>6} {:>8.2}",
+            "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10.4} {:>10.5} {:>9.2} {:>10.2} {:>6} {:>8.2} {:>4} {:<22}",
             r.scenario,
             r.filter,
             opt(r.detection_delay_s, 2),
@@ -42,6 +44,12 @@ pub fn render(rows: &[Row]) -> String {
             r.truth_in_bounds_after_1s_min_pct,
             r.false_decisions,
             r.us_per_step,
+            match r.isolated_correct {
+                Some(true) => "yes",
+                Some(false) => "no",
+                None => "-",
+            },
+            r.class.as_deref().unwrap_or("-"),
         );
     }
     out

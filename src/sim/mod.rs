@@ -5,3 +5,4 @@ pub mod lqr;
 pub mod noise;
 pub mod paper;
 pub mod rng;
+pub mod vehicle;

@@ -1,0 +1,444 @@
+//! Per-vehicle, per-actuator decisions from the two monitoring filters (estimators.md §4).
+//!
+//! The detection statistic is the actuator's *effective output deviation at its operating
+//! point*, `e_j = (gamma_j - 1) ū_j + delta_j` (ū_j the command averaged over a short window).
+//! In steady flight gamma and delta are nearly collinear (only `gamma ū + delta` is observed),
+//! so each wanders along that line while `e_j` stays well determined; gamma and delta apart are
+//! only used to classify, and only when the command has varied enough to separate them
+//! (otherwise `excitation_low` is emitted instead of a guess).
+//!
+//! Detection: a CUSUM on `|e_j| / threshold - 1` (units of seconds over threshold), alarm when
+//! it passes `cusum_h_s`; clearing when `|e_j|` has stayed below half the threshold for
+//! `clear_s` (hysteresis). The threshold is calibrated on healthy Monte-Carlo flights with gusts
+//! and model mismatch (`eval`'s healthy scenarios), never on the fault scenarios.
+
+use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
+use serde::Serialize;
+
+/// Detection, gating and classification settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiagnosisParams {
+    /// No decisions before this (s).
+    pub warmup_s: f64,
+    /// Window of the operating point and excitation statistics (s).
+    pub window_s: f64,
+    /// Effective output deviation (units of normalised command) that counts as a fault.
+    pub threshold: f64,
+    /// CUSUM alarm level (s of the statistic at twice the threshold ≈ this × 1).
+    pub cusum_h_s: f64,
+    /// Below half the threshold for this long clears a fault (s).
+    pub clear_s: f64,
+    /// Command standard deviation over the window below which gamma and delta are not separable.
+    pub excitation_min_std: f64,
+    /// The MIT-UKF's gamma standard deviation above which gamma is not identified.
+    pub sigma_gamma_max: f64,
+    /// Classification tolerances: gamma below `1 - loe_tau` is a loss of effectiveness; |delta|
+    /// above `bias_tau` is a bias; |gamma| below `stuck_gamma` with a bias is stuck.
+    pub loe_tau: f64,
+    pub bias_tau: f64,
+    pub stuck_gamma: f64,
+    /// Filters alarming on the same actuator within this time count as agreeing (s).
+    pub agree_s: f64,
+}
+
+impl Default for DiagnosisParams {
+    fn default() -> Self {
+        Self {
+            warmup_s: 5.0,
+            window_s: 2.0,
+            // Calibrated on the healthy flights with gusts and 10 % mismatch (see README).
+            threshold: 0.08,
+            cusum_h_s: 0.25,
+            clear_s: 2.0,
+            excitation_min_std: 0.01,
+            sigma_gamma_max: 0.05,
+            loe_tau: 0.15,
+            bias_tau: 0.04,
+            stuck_gamma: 0.25,
+            agree_s: 0.5,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultClass {
+    LossOfEffectiveness,
+    Stuck,
+    Bias,
+    Drift,
+}
+
+impl FaultClass {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FaultClass::LossOfEffectiveness => "loss_of_effectiveness",
+            FaultClass::Stuck => "stuck",
+            FaultClass::Bias => "bias",
+            FaultClass::Drift => "drift",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Event {
+    Fault,
+    Changed,
+    Cleared,
+    LinkLost,
+    LinkRestored,
+    ExcitationLow,
+    FilterReset,
+}
+
+/// One decision, as written to the decisions JSONL (DESIGN.md "Files").
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Decision {
+    pub t: f64,
+    pub sysid: u8,
+    pub event: Event,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub actuator: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub channel: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub class: Option<FaultClass>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gamma: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delta: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gamma_bounds: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delta_bounds: Option<[f64; 2]>,
+    /// Which filters agree.
+    pub filters: Vec<&'static str>,
+    pub confidence: f64,
+    /// Other actuators that also alarmed (a `multiple` isolation), by name.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub also: Vec<String>,
+    /// Free text for monitor conditions.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detail: Option<String>,
+}
+
+impl Decision {
+    pub fn monitor(t: f64, sysid: u8, event: Event, detail: impl Into<String>) -> Self {
+        Self {
+            t,
+            sysid,
+            event,
+            actuator: None,
+            channel: None,
+            class: None,
+            gamma: None,
+            delta: None,
+            gamma_bounds: None,
+            delta_bounds: None,
+            filters: vec![],
+            confidence: 0.0,
+            also: vec![],
+            detail: Some(detail.into()),
+        }
+    }
+}
+
+/// Exponential-window mean and variance of a command.
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    mean: f64,
+    var: f64,
+    init: bool,
+}
+
+impl Moments {
+    fn push(&mut self, x: f64, a: f64) {
+        if !self.init {
+            self.mean = x;
+            self.init = true;
+            return;
+        }
+        let d = x - self.mean;
+        self.mean += a * d;
+        self.var = (1.0 - a) * (self.var + a * d * d);
+    }
+}
+
+/// Detector state of one filter on one actuator.
+#[derive(Debug, Clone, Copy, Default)]
+struct Channel {
+    cusum: f64,
+    alarm: bool,
+    alarm_since: f64,
+    below: f64,
+    /// Slope regression of delta over the window (for `drift`): exponential sums.
+    last: AhcEstimate,
+    e: f64,
+}
+
+/// The actuator-level state across filters.
+#[derive(Debug, Clone, Default)]
+struct ActuatorState {
+    u: Moments,
+    channels: [Channel; 2],
+    /// The class of the fault in force (None = healthy).
+    active: Option<FaultClass>,
+    active_filters: Vec<&'static str>,
+    excitation_reported: bool,
+    delta_hist: Vec<(f64, f64)>,
+}
+
+/// Per-vehicle diagnosis over both filters.
+pub struct Diagnoser {
+    pub params: DiagnosisParams,
+    sysid: u8,
+    names: Vec<String>,
+    channels: Vec<u8>,
+    dt: f64,
+    t0: Option<f64>,
+    actuators: Vec<ActuatorState>,
+}
+
+impl Diagnoser {
+    pub fn new(
+        params: DiagnosisParams,
+        sysid: u8,
+        names: Vec<String>,
+        channels: Vec<u8>,
+        dt: f64,
+    ) -> Self {
+        let actuators = vec![ActuatorState::default(); names.len()];
+        Self {
+            params,
+            sysid,
+            names,
+            channels,
+            dt,
+            t0: None,
+            actuators,
+        }
+    }
+
+    /// The effective output deviation of each actuator and filter of the last update.
+    pub fn deviation(&self, filter: usize, j: usize) -> f64 {
+        self.actuators[j].channels[filter].e
+    }
+
+    pub fn active(&self, j: usize) -> Option<FaultClass> {
+        self.actuators[j].active
+    }
+
+    /// Feed one step: commands and both filters' estimates (`est[filter][j]`). Decisions are
+    /// appended to `out`.
+    pub fn update(
+        &mut self,
+        t: f64,
+        u: &[f64],
+        est: &[&[AhcEstimate]; 2],
+        out: &mut Vec<Decision>,
+    ) {
+        let p = self.params;
+        let t0 = *self.t0.get_or_insert(t);
+        let a = (self.dt / p.window_s).min(1.0);
+        let warm = t - t0 >= p.warmup_s;
+        let l = self.actuators.len();
+        for j in 0..l {
+            let st = &mut self.actuators[j];
+            st.u.push(u[j], a);
+            for f in 0..2 {
+                let e = est[f][j];
+                let ch = &mut st.channels[f];
+                ch.last = e;
+                ch.e = (e.gamma - 1.0) * st.u.mean + e.delta;
+                let ratio = ch.e.abs() / p.threshold;
+                ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
+                if !warm {
+                    ch.cusum = 0.0;
+                    continue;
+                }
+                if !ch.alarm && ch.cusum > p.cusum_h_s {
+                    ch.alarm = true;
+                    ch.alarm_since = t;
+                    ch.below = 0.0;
+                } else if ch.alarm {
+                    ch.below = if ratio < 0.5 { ch.below + self.dt } else { 0.0 };
+                    if ch.below >= p.clear_s {
+                        ch.alarm = false;
+                        ch.cusum = 0.0;
+                    }
+                }
+            }
+            st.delta_hist.push((t, est[0][j].delta));
+            let keep = (3.0 / self.dt) as usize;
+            if st.delta_hist.len() > keep {
+                let cut = st.delta_hist.len() - keep;
+                st.delta_hist.drain(..cut);
+            }
+        }
+        if !warm {
+            return;
+        }
+        // Isolation per filter: among the alarmed actuators the one with the largest deviation;
+        // the others alarmed at the same time are reported with it (`also`).
+        let mut top: [Option<usize>; 2] = [None, None];
+        for (f, slot) in top.iter_mut().enumerate() {
+            *slot = (0..l)
+                .filter(|&j| self.actuators[j].channels[f].alarm)
+                .max_by(|&x, &y| {
+                    let ex = self.actuators[x].channels[f].e.abs();
+                    let ey = self.actuators[y].channels[f].e.abs();
+                    ex.total_cmp(&ey)
+                });
+        }
+        for j in 0..l {
+            let filters: Vec<&'static str> = (0..2)
+                .filter(|&f| top[f] == Some(j))
+                .map(|f| FILTER_NAMES[f])
+                .collect();
+            let st = &self.actuators[j];
+            let cleared = st.active.is_some() && (0..2).all(|f| !st.channels[f].alarm);
+            if cleared {
+                let d = self.decision(t, j, Event::Cleared, None, vec![]);
+                out.push(d);
+                let st = &mut self.actuators[j];
+                st.active = None;
+                st.active_filters.clear();
+                continue;
+            }
+            if filters.is_empty() {
+                continue;
+            }
+            // Classification needs the command to have moved enough to separate gamma and delta.
+            let sigma_gamma = st.channels[0].last.block[0].max(0.0).sqrt();
+            let excited =
+                st.u.var.sqrt() >= p.excitation_min_std && sigma_gamma <= p.sigma_gamma_max;
+            let class = if excited {
+                Some(self.classify(j))
+            } else {
+                None
+            };
+            let also: Vec<String> = (0..l)
+                .filter(|&k| k != j && (0..2).any(|f| self.actuators[k].channels[f].alarm))
+                .map(|k| self.names[k].clone())
+                .collect();
+            let st = &self.actuators[j];
+            match (st.active, class) {
+                (None, None) => {
+                    if !st.excitation_reported {
+                        let mut d = self.decision(t, j, Event::ExcitationLow, None, filters);
+                        d.detail = Some(format!(
+                            "output deviates by {:.3} but the command has not varied enough (std {:.4}) to tell gain from bias",
+                            st.channels[0].e,
+                            st.u.var.sqrt()
+                        ));
+                        out.push(d);
+                        self.actuators[j].excitation_reported = true;
+                    }
+                }
+                (None, Some(c)) => {
+                    let mut d = self.decision(t, j, Event::Fault, Some(c), filters.clone());
+                    d.also = also;
+                    out.push(d);
+                    let st = &mut self.actuators[j];
+                    st.active = Some(c);
+                    st.active_filters = filters;
+                }
+                (Some(prev), c) => {
+                    let c = c.unwrap_or(prev);
+                    let mut union = st.active_filters.clone();
+                    for f in &filters {
+                        if !union.contains(f) {
+                            union.push(f);
+                        }
+                    }
+                    if c != prev || union.len() != st.active_filters.len() {
+                        let mut d = self.decision(t, j, Event::Changed, Some(c), union.clone());
+                        d.also = also;
+                        out.push(d);
+                        let st = &mut self.actuators[j];
+                        st.active = Some(c);
+                        st.active_filters = union;
+                    }
+                }
+            }
+        }
+    }
+
+    fn classify(&self, j: usize) -> FaultClass {
+        let p = &self.params;
+        let st = &self.actuators[j];
+        let e = st.channels[0].last;
+        let gamma_contains_one = e.gamma_lo <= 1.0 && 1.0 <= e.gamma_hi;
+        if e.gamma.abs() < p.stuck_gamma && !gamma_contains_one {
+            return FaultClass::Stuck;
+        }
+        // Drift: delta moving steadily over the last 3 s (t-test on the regression slope).
+        if st.delta_hist.len() > 20 {
+            let n = st.delta_hist.len() as f64;
+            let (mt, md) = st
+                .delta_hist
+                .iter()
+                .fold((0.0, 0.0), |a, (t, d)| (a.0 + t / n, a.1 + d / n));
+            let (mut stt, mut std_, mut sdd) = (0.0, 0.0, 0.0);
+            for (t, d) in &st.delta_hist {
+                stt += (t - mt) * (t - mt);
+                std_ += (t - mt) * (d - md);
+                sdd += (d - md) * (d - md);
+            }
+            let slope = std_ / stt;
+            let resid = (sdd - slope * std_).max(0.0) / (n - 2.0);
+            let se = (resid / stt).sqrt();
+            let span = slope.abs() * (st.delta_hist.last().unwrap().0 - st.delta_hist[0].0);
+            if se > 0.0 && slope.abs() / se > 30.0 && span > p.bias_tau {
+                return FaultClass::Drift;
+            }
+        }
+        if e.gamma < 1.0 - p.loe_tau
+            && e.delta.abs() < p.bias_tau.max(0.5 * (1.0 - e.gamma) * st.u.mean.abs())
+        {
+            return FaultClass::LossOfEffectiveness;
+        }
+        if e.delta.abs() > p.bias_tau && (e.gamma - 1.0).abs() < p.loe_tau {
+            return FaultClass::Bias;
+        }
+        // Mixed: say what the output lost at the operating point.
+        if st.channels[0].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
+            FaultClass::LossOfEffectiveness
+        } else {
+            FaultClass::Bias
+        }
+    }
+
+    fn decision(
+        &self,
+        t: f64,
+        j: usize,
+        event: Event,
+        class: Option<FaultClass>,
+        filters: Vec<&'static str>,
+    ) -> Decision {
+        let e = self.actuators[j].channels[0].last;
+        let confidence = match filters.len() {
+            0 => 0.0,
+            1 => 0.6,
+            _ => 0.9,
+        };
+        Decision {
+            t,
+            sysid: self.sysid,
+            event,
+            actuator: Some(self.names[j].clone()),
+            channel: Some(self.channels[j]),
+            class,
+            gamma: Some(e.gamma),
+            delta: Some(e.delta),
+            gamma_bounds: Some([e.gamma_lo, e.gamma_hi]),
+            delta_bounds: Some([e.delta_lo, e.delta_hi]),
+            filters,
+            confidence,
+            also: vec![],
+            detail: None,
+        }
+    }
+}

@@ -1,0 +1,254 @@
+//! The two monitoring filters (MIT-UKF and MIT-ESMF) on a vehicle's rate-effectiveness model,
+//! behind one object-safe face so the rest of ahcmon does not care how many actuators a vehicle
+//! has. Sizes are fixed at compile time (allocation-free steps); [`build`] picks the size that
+//! fits the profile.
+
+use super::{AdaptationParams, EsmfParams, Estimator, EstimatorError, MitEsmf, MitUkf, UkfParams};
+use crate::model::{RateModel, RateModelError};
+use crate::telemetry::Profile;
+use nalgebra::{SMatrix, SVector};
+use thiserror::Error;
+
+/// Filter names in the order of [`VehicleFilters`]' filter index.
+pub const FILTER_NAMES: [&str; 2] = ["mit-ukf", "mit-esmf"];
+
+/// Initial 1σ uncertainty of the rates (rad/s), gamma and delta (normalised command).
+pub const INITIAL_STD: [f64; 3] = [0.1, 0.1, 0.05];
+
+/// One actuator's health estimate from one filter.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AhcEstimate {
+    pub gamma: f64,
+    pub gamma_lo: f64,
+    pub gamma_hi: f64,
+    pub delta: f64,
+    pub delta_lo: f64,
+    pub delta_hi: f64,
+    /// The 2×2 block of the covariance (UKF) or shape (ESMF) of (gamma, delta):
+    /// `[gg, gd, dd]`.
+    pub block: [f64; 3],
+    /// Adapted process noise of gamma and delta.
+    pub q_gamma: f64,
+    pub q_delta: f64,
+}
+
+impl AhcEstimate {
+    /// `(a - h)ᵀ B⁻¹ (a - h)` of the estimate against the healthy point h = (1, 0).
+    pub fn distance2(&self) -> f64 {
+        let (dg, dd) = (self.gamma - 1.0, self.delta);
+        let [a, b, c] = self.block;
+        let det = a * c - b * b;
+        if !(det > 0.0) {
+            return 0.0;
+        }
+        (c * dg * dg - 2.0 * b * dg * dd + a * dd * dd) / det
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum BuildError {
+    #[error(
+        "{l} actuators with {m} measurements: this build has filters for 2, 3, 4, 6 or 8 actuators"
+    )]
+    Size { l: usize, m: usize },
+    #[error(transparent)]
+    Model(#[from] RateModelError),
+}
+
+/// Both monitoring filters of one vehicle.
+pub trait VehicleFilters: Send {
+    fn actuators(&self) -> usize;
+    fn measurements(&self) -> usize;
+    /// One step of both filters. `u.len()` = actuators, `y` = [p, q, r(, a_z)].
+    fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2];
+    fn ahc(&self, filter: usize, j: usize) -> AhcEstimate;
+    /// The normalised innovation square (UKF) or `M (1 - consistency)` (ESMF) of the last step.
+    fn nis(&self, filter: usize) -> f64;
+    /// Re-initialise one filter (after repeated numerical failure).
+    fn reset(&mut self, filter: usize);
+}
+
+/// The filter set-up a profile implies.
+#[derive(Debug, Clone)]
+pub struct FilterSetup<const N: usize, const M: usize> {
+    pub model: RateModel<N, M>,
+    pub x0: SVector<f64, N>,
+    pub kalman_p0: SMatrix<f64, N, N>,
+    pub kalman_q: SVector<f64, N>,
+    pub kalman_r: SMatrix<f64, M, M>,
+    pub set_p0: SMatrix<f64, N, N>,
+    pub set_q: SVector<f64, N>,
+    pub set_r: SMatrix<f64, M, M>,
+}
+
+impl<const N: usize, const M: usize> FilterSetup<N, M> {
+    pub fn from_profile(profile: &Profile, dt: f64) -> Result<Self, RateModelError> {
+        let model = RateModel::<N, M>::new(&profile.rate_params(), dt)?;
+        let l = model.actuators();
+        let noise = &profile.noise;
+        // The profile's process noise is per step at its own rate; rescale to this dt.
+        let rate_scale = (dt * profile.rate_hz).sqrt();
+        let mut std_q = SVector::<f64, N>::zeros();
+        let mut std_p0 = SVector::<f64, N>::zeros();
+        for i in 0..3 {
+            std_q[i] = noise.rate_process * rate_scale;
+            std_p0[i] = INITIAL_STD[0];
+        }
+        for j in 0..l {
+            std_q[3 + j] = noise.gamma_process * rate_scale;
+            std_q[3 + l + j] = noise.delta_process * rate_scale;
+            std_p0[3 + j] = INITIAL_STD[1];
+            std_p0[3 + l + j] = INITIAL_STD[2];
+        }
+        let mut std_r = SVector::<f64, M>::zeros();
+        for i in 0..3 {
+            std_r[i] = noise.gyro;
+        }
+        if M == 4 {
+            std_r[3] = noise.az;
+        }
+        let (n, m) = (N as f64, M as f64);
+        // Set filters: the 3σ box of each noise enclosed by an ellipsoid (dimension × box²).
+        Ok(Self {
+            x0: model.healthy_state([0.0; 3]),
+            kalman_p0: SMatrix::from_diagonal(&std_p0.component_mul(&std_p0)),
+            kalman_q: std_q.component_mul(&std_q),
+            kalman_r: SMatrix::from_diagonal(&std_r.component_mul(&std_r)),
+            set_p0: SMatrix::from_diagonal(&(std_p0.component_mul(&std_p0) * 9.0 * n)),
+            set_q: std_q.component_mul(&std_q) * 9.0 * n,
+            set_r: SMatrix::from_diagonal(&(std_r.component_mul(&std_r) * 9.0 * m)),
+            model,
+        })
+    }
+}
+
+/// MIT-UKF and MIT-ESMF of one size.
+pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
+    pub ukf: MitUkf<RateModel<N, M>, N, M, S>,
+    pub esmf: MitEsmf<RateModel<N, M>, N, M>,
+    setup: FilterSetup<N, M>,
+}
+
+impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
+    pub fn new(setup: FilterSetup<N, M>) -> Self {
+        let adapt = AdaptationParams::default();
+        Self {
+            ukf: Self::new_ukf(&setup, adapt),
+            esmf: Self::new_esmf(&setup, adapt),
+            setup,
+        }
+    }
+
+    fn new_ukf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitUkf<RateModel<N, M>, N, M, S> {
+        MitUkf::new(
+            s.model,
+            UkfParams::default(),
+            adapt,
+            s.x0,
+            s.kalman_p0,
+            s.kalman_q,
+            s.kalman_r,
+        )
+    }
+
+    fn new_esmf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitEsmf<RateModel<N, M>, N, M> {
+        MitEsmf::new(
+            s.model,
+            EsmfParams::default(),
+            adapt,
+            s.x0,
+            s.set_p0,
+            s.set_q,
+            s.set_r,
+        )
+    }
+}
+
+fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
+    f: &E,
+    p: &SMatrix<f64, N, N>,
+    l: usize,
+    j: usize,
+) -> AhcEstimate {
+    let (gi, di) = (3 + j, 3 + l + j);
+    let x = f.state();
+    let (gamma_lo, gamma_hi) = f.bounds(gi);
+    let (delta_lo, delta_hi) = f.bounds(di);
+    let q = f.process_noise();
+    AhcEstimate {
+        gamma: x[gi],
+        gamma_lo,
+        gamma_hi,
+        delta: x[di],
+        delta_lo,
+        delta_hi,
+        block: [p[(gi, gi)], p[(gi, di)], p[(di, di)]],
+        q_gamma: q[gi],
+        q_delta: q[di],
+    }
+}
+
+impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPair<N, M, S> {
+    fn actuators(&self) -> usize {
+        (N - 3) / 2
+    }
+    fn measurements(&self) -> usize {
+        M
+    }
+    fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2] {
+        if y.len() != M {
+            let e = EstimatorError::InputDimension {
+                expected: M,
+                got: y.len(),
+            };
+            return [Err(e.clone()), Err(e)];
+        }
+        let y = SVector::<f64, M>::from_column_slice(y);
+        [
+            self.ukf.try_step(u, &y),
+            self.esmf.try_step(u, &y).map(|_| ()),
+        ]
+    }
+    fn ahc(&self, filter: usize, j: usize) -> AhcEstimate {
+        let l = self.actuators();
+        if filter == 0 {
+            estimate(&self.ukf, &self.ukf.ukf.p, l, j)
+        } else {
+            estimate(&self.esmf, &self.esmf.esmf.p, l, j)
+        }
+    }
+    fn nis(&self, filter: usize) -> f64 {
+        if filter == 0 {
+            self.ukf.ukf.nis
+        } else {
+            M as f64 * (1.0 - self.esmf.esmf.last.consistency)
+        }
+    }
+    fn reset(&mut self, filter: usize) {
+        let adapt = AdaptationParams::default();
+        if filter == 0 {
+            self.ukf = Self::new_ukf(&self.setup, adapt);
+        } else {
+            self.esmf = Self::new_esmf(&self.setup, adapt);
+        }
+    }
+}
+
+macro_rules! sized {
+    ($profile:expr, $dt:expr, $l:expr, $m:expr; $(($ll:literal, $mm:literal, $n:literal, $s:literal)),*) => {
+        match ($l, $m) {
+            $(($ll, $mm) => Ok(Box::new(FilterPair::<$n, $mm, $s>::new(
+                FilterSetup::from_profile($profile, $dt)?,
+            )) as Box<dyn VehicleFilters>),)*
+            (l, m) => Err(BuildError::Size { l, m }),
+        }
+    };
+}
+
+/// Both filters for a profile at sample period `dt`.
+pub fn build(profile: &Profile, dt: f64) -> Result<Box<dyn VehicleFilters>, BuildError> {
+    let (l, m) = (profile.actuators.len(), profile.measurements());
+    sized!(profile, dt, l, m;
+        (2, 3, 7, 15), (3, 3, 9, 19), (4, 3, 11, 23), (6, 3, 15, 31), (8, 3, 19, 39),
+        (2, 4, 7, 15), (3, 4, 9, 19), (4, 4, 11, 23), (6, 4, 15, 31), (8, 4, 19, 39))
+}

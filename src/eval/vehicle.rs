@@ -1,0 +1,231 @@
+//! `eval` on the vehicle scenarios: the vehicle simulator → MIT-UKF ‖ MIT-ESMF → diagnosis,
+//! scored against the simulator's truth: isolation, class, false decisions, settling.
+
+use super::{EvalError, FilterRun, Metrics, Run, Trace};
+use crate::diagnose::vehicle::{Decision, Diagnoser, DiagnosisParams, Event};
+use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES, build};
+use crate::model::MAX_ACTUATORS;
+use crate::scenario::NamedScenario;
+use crate::sim::vehicle::{ModelMismatch, VehicleSample, VehicleSim, VehicleSimConfig};
+use crate::telemetry::Profile;
+use std::time::Instant;
+
+/// Isolation must happen within this long after onset.
+const ISOLATE_WITHIN_S: f64 = 2.0;
+/// The class is judged on the decision in force this long after onset.
+const CLASS_AT_S: f64 = 5.0;
+const TRACE_POINTS: usize = 2000;
+
+/// What a caller may want to see of every step (JSONL writers).
+pub trait StepSink {
+    fn step(&mut self, sample: &VehicleSample, est: &[&[AhcEstimate]; 2], profile: &Profile);
+    fn decision(&mut self, d: &Decision);
+}
+
+/// A sink that keeps nothing.
+pub struct NoSink;
+impl StepSink for NoSink {
+    fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
+    fn decision(&mut self, _: &Decision) {}
+}
+
+pub fn sim_config(
+    named: &NamedScenario,
+    seed: u64,
+) -> Result<(VehicleSimConfig, Profile), EvalError> {
+    let scn = &named.scenario;
+    let err = |e: String| EvalError::Sim(named.name.clone(), e);
+    let vehicle = Profile::resolve(&scn.vehicle).map_err(|e| err(e.to_string()))?;
+    let monitor = match &scn.profile {
+        Some(p) => Profile::resolve(p).map_err(|e| err(e.to_string()))?,
+        None => vehicle.clone(),
+    };
+    let cfg = VehicleSimConfig {
+        dt: scn.dt(),
+        gyro_noise: scn.gyro_noise.unwrap_or(vehicle.noise.gyro),
+        az_noise: scn.az_noise.unwrap_or(vehicle.noise.az),
+        profile: vehicle,
+        mismatch: scn.model_mismatch.unwrap_or(ModelMismatch {
+            damping: 1.0,
+            effectiveness: 1.0,
+        }),
+        gusts: scn.gusts.clone(),
+        dither: scn.attitude_dither.clone(),
+        manoeuvres: scn.manoeuvres.clone(),
+        faults: scn.faults.clone(),
+        seed,
+    };
+    Ok((cfg, monitor))
+}
+
+pub fn run_vehicle_scenario(
+    named: &NamedScenario,
+    seed: u64,
+    keep_traces: bool,
+    sink: &mut dyn StepSink,
+) -> Result<Run, EvalError> {
+    let scn = &named.scenario;
+    let err = |e: String| EvalError::Sim(named.name.clone(), e);
+    let (cfg, profile) = sim_config(named, seed)?;
+    let dt = cfg.dt;
+    let mut sim = VehicleSim::new(cfg).map_err(err)?;
+    let mut filters = build(&profile, dt).map_err(|e| err(e.to_string()))?;
+    let l = filters.actuators();
+    let m = filters.measurements();
+    let names = profile.actuator_names();
+    let channels: Vec<u8> = profile.actuators.iter().map(|a| a.channel).collect();
+    let mut diag = Diagnoser::new(DiagnosisParams::default(), 1, names.clone(), channels, dt);
+    let fault = scn.first_fault();
+    let onset = fault.map(|f| f.t);
+    let target = fault.and_then(|f| profile.actuator_index(&f.actuator));
+    let moves_gamma = fault.is_none_or(|f| f.moves_gamma());
+    let steps = scn.steps();
+    let steady_from = scn.duration_s * (1.0 - scn.eval.steady_fraction);
+    let decimate = steps.div_ceil(TRACE_POINTS).max(1);
+
+    let mut decisions: Vec<Decision> = Vec::new();
+    let mut new_decisions = Vec::new();
+    let mut est = [[AhcEstimate::default(); MAX_ACTUATORS]; 2];
+    let mut nanos = 0u128;
+    let mut errors = [0u64; 2];
+    let mut last_violation: [Option<f64>; 2] = [None, None];
+    let mut sq_g = [(0.0, 0usize); 2];
+    let mut sq_d = [(0.0, 0usize); 2];
+    let mut inside = [(0usize, 0usize); 2];
+    let mut traces = [Trace::default(), Trace::default()];
+    let mut truth = Trace::default();
+    let watch = target.unwrap_or(0);
+    for k in 0..steps {
+        let s = sim.step();
+        let t0 = Instant::now();
+        let res = filters.step(&s.u[..l], &s.y[..m]);
+        nanos += t0.elapsed().as_nanos();
+        for (f, r) in res.iter().enumerate() {
+            if r.is_err() {
+                errors[f] += 1;
+            }
+            for j in 0..l {
+                est[f][j] = filters.ahc(f, j);
+            }
+        }
+        let views = [&est[0][..l], &est[1][..l]];
+        new_decisions.clear();
+        diag.update(s.t, &s.u[..l], &views, &mut new_decisions);
+        for d in &new_decisions {
+            sink.decision(d);
+        }
+        decisions.extend(new_decisions.drain(..));
+        sink.step(&s, &views, &profile);
+        // Scores on the watched actuator (the faulty one; actuator 0 in a healthy flight).
+        let (g_true, d_true) = (s.gamma[watch], s.delta[watch]);
+        for f in 0..2 {
+            let e = est[f][watch];
+            let ok = if moves_gamma {
+                (e.gamma - g_true).abs() <= scn.eval.settle_tol_gamma
+            } else {
+                (e.delta - d_true).abs() <= scn.eval.settle_tol_delta
+            };
+            if !ok {
+                last_violation[f] = Some(s.t);
+            }
+            if s.t >= steady_from {
+                sq_g[f].0 += (e.gamma - g_true).powi(2);
+                sq_g[f].1 += 1;
+                sq_d[f].0 += (e.delta - d_true).powi(2);
+                sq_d[f].1 += 1;
+            }
+            let within = e.gamma_lo <= g_true
+                && g_true <= e.gamma_hi
+                && e.delta_lo <= d_true
+                && d_true <= e.delta_hi;
+            inside[f].0 += within as usize;
+            inside[f].1 += 1;
+            if keep_traces && k % decimate == 0 {
+                traces[f].push(
+                    s.t,
+                    e.gamma,
+                    (e.gamma_lo, e.gamma_hi),
+                    e.delta,
+                    (e.delta_lo, e.delta_hi),
+                );
+            }
+        }
+        if keep_traces && k % decimate == 0 {
+            truth.push(s.t, g_true, (g_true, g_true), d_true, (d_true, d_true));
+        }
+    }
+    let us_per_step = nanos as f64 / 1000.0 / steps.max(1) as f64;
+    let runs = (0..2)
+        .map(|f| {
+            let name = FILTER_NAMES[f];
+            let mine: Vec<&Decision> = decisions
+                .iter()
+                .filter(|d| {
+                    matches!(d.event, Event::Fault | Event::Changed) && d.filters.contains(&name)
+                })
+                .collect();
+            let is_right = |d: &Decision| {
+                target.is_some_and(|j| d.actuator.as_deref() == Some(names[j].as_str()))
+            };
+            let false_decisions = mine
+                .iter()
+                .filter(|d| d.event == Event::Fault || !is_right(d))
+                .filter(|d| !is_right(d) || onset.is_none_or(|t0| d.t < t0))
+                .count() as u32;
+            let first_right = mine
+                .iter()
+                .find(|d| is_right(d) && onset.is_some_and(|t0| d.t >= t0))
+                .map(|d| d.t);
+            let detection_delay_s = onset.zip(first_right).map(|(t0, t)| t - t0);
+            let isolated_correct = onset.map(|_| {
+                detection_delay_s.is_some_and(|d| d <= ISOLATE_WITHIN_S) && false_decisions == 0
+            });
+            let class = onset.and_then(|t0| {
+                decisions
+                    .iter()
+                    .filter(|d| is_right(d) && d.t <= t0 + CLASS_AT_S && d.class.is_some())
+                    .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
+                    .next_back()
+                    .and_then(|d| d.class)
+                    .map(|c| c.as_str().to_string())
+            });
+            let settle_s = onset.and_then(|t0| match last_violation[f] {
+                None => Some(0.0),
+                Some(tv) if tv < scn.duration_s - 1.0 => Some((tv - t0).max(0.0)),
+                _ => None,
+            });
+            let rmse = |(s, n): (f64, usize)| if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
+            FilterRun {
+                filter: name,
+                metrics: Metrics {
+                    detection_delay_s,
+                    settle_s,
+                    gamma_rmse_3s: None,
+                    gamma_rmse_steady: rmse(sq_g[f]),
+                    delta_rmse_steady: rmse(sq_d[f]),
+                    truth_in_bounds_pct: 100.0 * inside[f].0 as f64 / inside[f].1.max(1) as f64,
+                    truth_in_bounds_after_1s_pct: f64::NAN,
+                    false_decisions,
+                    us_per_step,
+                    step_errors: errors[f],
+                    isolated_correct,
+                    class,
+                    excitation_low: decisions
+                        .iter()
+                        .filter(|d| d.event == Event::ExcitationLow)
+                        .count() as u32,
+                },
+                trace: std::mem::take(&mut traces[f]),
+                decisions: mine.iter().map(|d| d.t).collect(),
+            }
+        })
+        .collect();
+    Ok(Run {
+        scenario: named.name.clone(),
+        vehicle: profile.name.clone(),
+        seed,
+        truth,
+        filters: runs,
+        final_speed: f64::NAN,
+    })
+}
