@@ -51,7 +51,7 @@ impl Default for DiagnosisParams {
             cusum_h_s: 0.25,
             clear_s: 2.0,
             excitation_min_std: 0.01,
-            sigma_gamma_max: 0.05,
+            sigma_gamma_max: 0.15,
             loe_tau: 0.15,
             bias_tau: 0.04,
             stuck_gamma: 0.25,
@@ -186,6 +186,7 @@ struct ActuatorState {
     active: Option<FaultClass>,
     active_filters: Vec<&'static str>,
     excitation_reported: bool,
+    low_for: f64,
     delta_hist: Vec<(f64, f64)>,
 }
 
@@ -292,6 +293,26 @@ impl Diagnoser {
                 });
         }
         for j in 0..l {
+            // Gating: say once when gain and bias cannot be told apart (and again after the
+            // command has been exciting in between).
+            let st = &self.actuators[j];
+            let sigma_gamma = st.channels[0].last.block[0].max(0.0).sqrt();
+            let low = st.u.var.sqrt() < p.excitation_min_std || sigma_gamma > p.sigma_gamma_max;
+            let st = &mut self.actuators[j];
+            st.low_for = if low { st.low_for + self.dt } else { 0.0 };
+            if !low {
+                st.excitation_reported = false;
+            } else if st.low_for >= p.window_s && !st.excitation_reported && st.active.is_none() {
+                st.excitation_reported = true;
+                let mut d = self.decision(t, j, Event::ExcitationLow, None, vec![]);
+                d.detail = Some(format!(
+                    "command std {:.4} over {} s, gamma std {:.3}: gain and bias not separable",
+                    self.actuators[j].u.var.sqrt(),
+                    p.window_s,
+                    sigma_gamma
+                ));
+                out.push(d);
+            }
             let filters: Vec<&'static str> = (0..2)
                 .filter(|&f| top[f] == Some(j))
                 .map(|f| FILTER_NAMES[f])
@@ -310,9 +331,7 @@ impl Diagnoser {
                 continue;
             }
             // Classification needs the command to have moved enough to separate gamma and delta.
-            let sigma_gamma = st.channels[0].last.block[0].max(0.0).sqrt();
-            let excited =
-                st.u.var.sqrt() >= p.excitation_min_std && sigma_gamma <= p.sigma_gamma_max;
+            let excited = !low;
             let class = if excited {
                 Some(self.classify(j))
             } else {
