@@ -124,5 +124,52 @@ fn paper_run(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, steps, paper_run);
+/// Quad X with a_z: n = 11, m = 4 (DESIGN.md target: ≤ 10 µs per step per filter).
+fn vehicle_steps(c: &mut Criterion) {
+    use ahcmon::estimate::vehicle::{FilterPair, FilterSetup};
+    use ahcmon::sim::vehicle::{AttitudeDither, ModelMismatch, VehicleSim, VehicleSimConfig};
+    use ahcmon::telemetry::Profile;
+    let profile = Profile::resolve("quad-x").unwrap();
+    let mut sim = VehicleSim::new(VehicleSimConfig {
+        dt: 0.02,
+        profile: profile.clone(),
+        mismatch: ModelMismatch {
+            damping: 1.0,
+            effectiveness: 1.0,
+        },
+        gusts: None,
+        dither: Some(AttitudeDither {
+            amplitude: [0.05, 0.05, 0.1],
+            freqs_hz: vec![0.3, 0.7, 1.1],
+        }),
+        manoeuvres: vec![],
+        faults: vec![],
+        gyro_noise: 0.003,
+        az_noise: 0.3,
+        seed: 1,
+    })
+    .unwrap();
+    let data: Vec<_> = (0..2000).map(|_| sim.step()).collect();
+    let setup = FilterSetup::<11, 4>::from_profile(&profile, 0.02).unwrap();
+    let mut g = c.benchmark_group("vehicle-step-n11");
+    for which in ["mit-ukf", "mit-esmf"] {
+        g.bench_function(which, |b| {
+            let mut pair = FilterPair::<11, 4, 23>::new(setup.clone());
+            let mut i = 0;
+            b.iter(|| {
+                let s = &data[i % data.len()];
+                i += 1;
+                let y = nalgebra::SVector::<f64, 4>::from_column_slice(&s.y);
+                if which == "mit-ukf" {
+                    black_box(pair.ukf.try_step(&s.u[..4], &y).is_ok())
+                } else {
+                    black_box(pair.esmf.try_step(&s.u[..4], &y).is_ok())
+                }
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, steps, paper_run, vehicle_steps);
 criterion_main!(benches);

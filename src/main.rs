@@ -1,6 +1,8 @@
 //! ahcmon command line: parses arguments and wires the pipeline; the work is in the library.
 
-use ahcmon::eval::{Run, aggregate, run_scenario};
+use ahcmon::eval::vehicle::{run_vehicle_scenario, sim_config};
+use ahcmon::eval::{EvalError, Run, aggregate, run_scenario};
+use ahcmon::output::jsonl::RunFiles;
 use ahcmon::output::{svg, table};
 use ahcmon::scenario::{self, NamedScenario, ScenarioError};
 use anyhow::Context;
@@ -38,12 +40,39 @@ enum Command {
         /// Run each scenario with this many seeds (the scenario's seed, +1, +2, ...).
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
         seeds: u64,
+        /// Write the decisions JSONL of the first seed (one vehicle scenario only).
+        #[arg(long, value_name = "FILE")]
+        decisions: Option<PathBuf>,
+        /// Write the estimates JSONL of the first seed (one vehicle scenario only).
+        #[arg(long, value_name = "FILE")]
+        estimates: Option<PathBuf>,
+        /// Write every k-th step's estimates.
+        #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+        decimate: u64,
+    },
+    /// Fly a vehicle scenario in the simulator (with the monitor's filters and diagnosis
+    /// running on it) and write its ground truth, decisions and estimates as JSON lines.
+    Sim {
+        /// Scenario file or built-in name (a vehicle scenario, e.g. quad-x-motor2-loe).
+        #[arg(long)]
+        scenario: String,
+        /// Truth JSONL: per step, every actuator's true gamma and delta and the noise in force.
+        #[arg(long, value_name = "FILE")]
+        truth: Option<PathBuf>,
+        #[arg(long, value_name = "FILE")]
+        decisions: Option<PathBuf>,
+        #[arg(long, value_name = "FILE")]
+        estimates: Option<PathBuf>,
+        /// Seed (default: the scenario's).
+        #[arg(long)]
+        seed: Option<u64>,
     },
 }
 
 /// Errors that are the user's input (exit code 2) rather than ours (exit code 1).
 fn is_input_error(e: &anyhow::Error) -> bool {
-    e.chain().any(|c| c.is::<ScenarioError>())
+    e.chain()
+        .any(|c| c.is::<ScenarioError>() || c.is::<UsageError>() || c.is::<EvalError>())
 }
 
 fn main() -> ExitCode {
@@ -69,8 +98,84 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             json,
             plot,
             seeds,
-        } => eval(scenarios, json, plot, seeds),
+            decisions,
+            estimates,
+            decimate,
+        } => {
+            if decisions.is_some() || estimates.is_some() {
+                let [one] = scenarios.as_slice() else {
+                    return Err(UsageError(
+                        "--decisions / --estimates take exactly one scenario".into(),
+                    )
+                    .into());
+                };
+                let named = scenario::resolve(one)?;
+                let files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), decimate)
+                    .context("cannot create output file")?;
+                return run_with_files(&named, named.scenario.seed, files, false);
+            }
+            eval(scenarios, json, plot, seeds)
+        }
+        Command::Sim {
+            scenario: name,
+            truth,
+            decisions,
+            estimates,
+            seed,
+        } => {
+            let named = scenario::resolve(&name)?;
+            let (cfg, _) = sim_config(&named, 0)?;
+            let mut files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), 1)
+                .context("cannot create output file")?;
+            if let Some(path) = &truth {
+                files = files
+                    .with_truth(path, cfg.gyro_noise, cfg.az_noise)
+                    .with_context(|| format!("cannot create {}", path.display()))?;
+            }
+            run_with_files(&named, seed.unwrap_or(named.scenario.seed), files, true)
+        }
     }
+}
+
+/// A mistake in how the command line combines things (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct UsageError(String);
+
+/// One vehicle run with its JSONL files; prints what was written and the decisions.
+fn run_with_files(
+    named: &NamedScenario,
+    seed: u64,
+    mut files: RunFiles,
+    print: bool,
+) -> anyhow::Result<()> {
+    if named.scenario.is_paper() {
+        return Err(UsageError(format!(
+            "{} is a paper scenario; decision and truth files come from vehicle scenarios",
+            named.name
+        ))
+        .into());
+    }
+    let run = run_vehicle_scenario(named, seed, false, &mut files)?;
+    if let Some(e) = files.error.take() {
+        return Err(anyhow::Error::new(e).context("writing JSON lines"));
+    }
+    let count =
+        |w: &Option<ahcmon::output::jsonl::JsonlWriter<_>>| w.as_ref().map_or(0, |w| w.lines);
+    let truth_lines = files.truth.as_ref().map_or(0, |(w, _, _)| w.lines);
+    if print {
+        println!(
+            "{}: {} s of {} (seed {}): {} decision lines, {} estimate lines, {} truth lines",
+            named.name,
+            named.scenario.duration_s,
+            run.vehicle,
+            seed,
+            count(&files.decisions),
+            count(&files.estimates),
+            truth_lines
+        );
+    }
+    Ok(())
 }
 
 fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> anyhow::Result<()> {

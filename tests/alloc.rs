@@ -30,6 +30,8 @@ unsafe impl GlobalAlloc for Counting {
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
+/// The counter is process-wide: tests that count take this so they do not count each other.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn count<F: FnMut()>(mut f: F) -> u64 {
     let before = ALLOCS.load(Ordering::SeqCst);
@@ -39,6 +41,7 @@ fn count<F: FnMut()>(mut f: F) -> u64 {
 
 #[test]
 fn a_thousand_steps_of_each_filter_allocate_nothing() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let process = NoiseSchedule::constant(NoiseKind::Gaussian, 1e-4);
     let measurement = NoiseSchedule::constant(NoiseKind::Gaussian, 2.89e-6);
     let fault: ahcmon::sim::fault::Fault =
@@ -134,4 +137,58 @@ fn a_thousand_steps_of_each_filter_allocate_nothing() {
     for (name, c) in counts {
         assert_eq!(c, 0, "{name}: {c} heap allocations in 1000 steps");
     }
+}
+
+/// The vehicle filters: quad X with a_z (n = 11, m = 4) and an octocopter-sized model
+/// (8 actuators, n = 19), both filters, no heap allocation per step.
+#[test]
+fn vehicle_filter_steps_allocate_nothing() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    use ahcmon::estimate::vehicle::{FilterPair, FilterSetup, VehicleFilters};
+    use ahcmon::sim::vehicle::{ModelMismatch, VehicleSim, VehicleSimConfig};
+    use ahcmon::telemetry::Profile;
+    let profile = Profile::resolve("quad-x").unwrap();
+    let mut sim = VehicleSim::new(VehicleSimConfig {
+        dt: 0.02,
+        profile: profile.clone(),
+        mismatch: ModelMismatch {
+            damping: 1.0,
+            effectiveness: 1.0,
+        },
+        gusts: None,
+        dither: None,
+        manoeuvres: vec![],
+        faults: vec![],
+        gyro_noise: 0.003,
+        az_noise: 0.3,
+        seed: 1,
+    })
+    .unwrap();
+    let samples: Vec<_> = (0..1000).map(|_| sim.step()).collect();
+    let mut quad = FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, 0.02).unwrap());
+    let n = count(|| {
+        for s in &samples {
+            let r = quad.step(&s.u[..4], &s.y[..4]);
+            assert!(r.iter().all(|r| r.is_ok()));
+        }
+    });
+    assert_eq!(n, 0, "quad: {n} allocations in 1000 steps");
+    // Eight actuators: the quad's motors twice over (an X8-like coaxial layout).
+    let mut octo = profile.clone();
+    let mut extra = octo.actuators.clone();
+    for (i, a) in extra.iter_mut().enumerate() {
+        a.name = format!("motor{}", i + 5);
+        a.channel = (i + 5) as u8;
+    }
+    octo.actuators.extend(extra);
+    let mut eight = FilterPair::<19, 4, 39>::new(FilterSetup::from_profile(&octo, 0.02).unwrap());
+    let n = count(|| {
+        for s in &samples[..200] {
+            let mut u = [0.0; 8];
+            u[..4].copy_from_slice(&s.u[..4]);
+            u[4..].copy_from_slice(&s.u[..4]);
+            let _ = eight.step(&u, &s.y[..4]);
+        }
+    });
+    assert_eq!(n, 0, "octo: {n} allocations in 200 steps");
 }

@@ -13,6 +13,7 @@
 //! and model mismatch (`eval`'s healthy scenarios), never on the fault scenarios.
 
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
+use crate::telemetry::{Profile, Role};
 use serde::Serialize;
 
 /// Detection, gating and classification settings.
@@ -199,25 +200,62 @@ pub struct Diagnoser {
     dt: f64,
     t0: Option<f64>,
     actuators: Vec<ActuatorState>,
+    /// Group id of each actuator (like actuators share one).
+    groups: Vec<usize>,
 }
 
 impl Diagnoser {
-    pub fn new(
-        params: DiagnosisParams,
-        sysid: u8,
-        names: Vec<String>,
-        channels: Vec<u8>,
-        dt: f64,
-    ) -> Self {
-        let actuators = vec![ActuatorState::default(); names.len()];
+    pub fn new(params: DiagnosisParams, sysid: u8, profile: &Profile, dt: f64) -> Self {
+        let names = profile.actuator_names();
+        let channels = profile.actuators.iter().map(|a| a.channel).collect();
+        let groups = profile
+            .actuators
+            .iter()
+            .enumerate()
+            .map(|(j, a)| match a.role {
+                Role::Motor => 0,
+                Role::Swash => 1,
+                _ => 2 + j,
+            })
+            .collect();
+        let params = DiagnosisParams {
+            threshold: profile.diagnosis.threshold,
+            ..params
+        };
         Self {
             params,
             sysid,
+            actuators: vec![ActuatorState::default(); names.len()],
             names,
             channels,
             dt,
             t0: None,
-            actuators,
+            groups,
+        }
+    }
+
+    /// The median deviation of actuator `j`'s group of like actuators (three or more motors or
+    /// swash servos): all of them moving together is model mismatch or a payload change, not
+    /// one actuator's fault. Zero for actuators without such a group.
+    fn common_mode(&self, raw: &[f64], j: usize) -> f64 {
+        let g = self.groups[j];
+        let mut v = [0.0; crate::model::MAX_ACTUATORS];
+        let mut n = 0;
+        for (k, e) in raw.iter().enumerate() {
+            if self.groups[k] == g {
+                v[n] = *e;
+                n += 1;
+            }
+        }
+        if n < 3 {
+            return 0.0;
+        }
+        let v = &mut v[..n];
+        v.sort_by(f64::total_cmp);
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
         }
     }
 
@@ -244,14 +282,29 @@ impl Diagnoser {
         let a = (self.dt / p.window_s).min(1.0);
         let warm = t - t0 >= p.warmup_s;
         let l = self.actuators.len();
+        // Raw deviations first, then the common mode of each group of like actuators removed.
+        let mut raw = [[0.0; crate::model::MAX_ACTUATORS]; 2];
         for j in 0..l {
             let st = &mut self.actuators[j];
             st.u.push(u[j], a);
             for f in 0..2 {
                 let e = est[f][j];
+                raw[f][j] = (e.gamma - 1.0) * st.u.mean + e.delta;
+            }
+        }
+        let mut common = [[0.0; crate::model::MAX_ACTUATORS]; 2];
+        for (c, r) in common.iter_mut().zip(&raw) {
+            for (j, slot) in c[..l].iter_mut().enumerate() {
+                *slot = self.common_mode(&r[..l], j);
+            }
+        }
+        for j in 0..l {
+            let st = &mut self.actuators[j];
+            for f in 0..2 {
+                let e = est[f][j];
                 let ch = &mut st.channels[f];
                 ch.last = e;
-                ch.e = (e.gamma - 1.0) * st.u.mean + e.delta;
+                ch.e = raw[f][j] - common[f][j];
                 let ratio = ch.e.abs() / p.threshold;
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
                 if !warm {

@@ -38,7 +38,7 @@ impl AhcEstimate {
         let (dg, dd) = (self.gamma - 1.0, self.delta);
         let [a, b, c] = self.block;
         let det = a * c - b * b;
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return 0.0;
         }
         (c * dg * dg - 2.0 * b * dg * dd + a * dd * dd) / det

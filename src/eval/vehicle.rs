@@ -73,8 +73,7 @@ pub fn run_vehicle_scenario(
     let l = filters.actuators();
     let m = filters.measurements();
     let names = profile.actuator_names();
-    let channels: Vec<u8> = profile.actuators.iter().map(|a| a.channel).collect();
-    let mut diag = Diagnoser::new(DiagnosisParams::default(), 1, names.clone(), channels, dt);
+    let mut diag = Diagnoser::new(DiagnosisParams::default(), 1, &profile, dt);
     let fault = scn.first_fault();
     let onset = fault.map(|f| f.t);
     let target = fault.and_then(|f| profile.actuator_index(&f.actuator));
@@ -104,8 +103,8 @@ pub fn run_vehicle_scenario(
             if r.is_err() {
                 errors[f] += 1;
             }
-            for j in 0..l {
-                est[f][j] = filters.ahc(f, j);
+            for (j, slot) in est[f][..l].iter_mut().enumerate() {
+                *slot = filters.ahc(f, j);
             }
         }
         let views = [&est[0][..l], &est[1][..l]];
@@ -114,7 +113,7 @@ pub fn run_vehicle_scenario(
         for d in &new_decisions {
             sink.decision(d);
         }
-        decisions.extend(new_decisions.drain(..));
+        decisions.append(&mut new_decisions);
         sink.step(&s, &views, &profile);
         // Scores on the watched actuator (the faulty one; actuator 0 in a healthy flight).
         let (g_true, d_true) = (s.gamma[watch], s.delta[watch]);
@@ -183,9 +182,12 @@ pub fn run_vehicle_scenario(
             let class = onset.and_then(|t0| {
                 decisions
                     .iter()
-                    .filter(|d| is_right(d) && d.t <= t0 + CLASS_AT_S && d.class.is_some())
-                    .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
-                    .next_back()
+                    .rfind(|d| {
+                        is_right(d)
+                            && d.t <= t0 + CLASS_AT_S
+                            && d.class.is_some()
+                            && matches!(d.event, Event::Fault | Event::Changed)
+                    })
                     .and_then(|d| d.class)
                     .map(|c| c.as_str().to_string())
             });

@@ -6,6 +6,7 @@
 //! gyroscopic terms. That is what the ESMF needs for an exact linearisation-error bound (a
 //! constant Hessian), so the trait exposes those terms explicitly.
 
+pub mod calibrate;
 mod paper_heli;
 mod rate;
 

@@ -9,6 +9,9 @@
 //! `N = 3 + 2l`; `M = 3` (gyro only) or `M = 4` (gyro and vertical specific force). Linear in
 //! `z` for a known `u`; the rates are discretised by zero-order hold of the diagonal damping.
 
+// Index loops mirror the matrix maths (rows i, actuators j) and read best that way.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{SMatrix, SVector};
 
 use super::{BilinearTerm, Model};

@@ -1,4 +1,5 @@
 //! Sinks: the eval table and JSON, SVG plots.
 
+pub mod jsonl;
 pub mod svg;
 pub mod table;

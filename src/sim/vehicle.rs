@@ -8,6 +8,9 @@
 //! Pure: no I/O. The rates are advanced with the zero-order hold of the diagonal damping (the
 //! discretisation the filters use), the gust torque held over the step.
 
+// Index loops mirror the matrix maths (rows i, actuators j) and read best that way.
+#![allow(clippy::needless_range_loop)]
+
 use super::fault::{Fault, health_of};
 use super::rng::Rng;
 use crate::model::{MAX_ACTUATORS, RateParams};

@@ -129,6 +129,19 @@ fn az_noise() -> f64 {
     0.3
 }
 
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DiagnosisSpec {
+    /// Effective output deviation (units of normalised command) that counts as a fault.
+    pub threshold: f64,
+}
+
+impl Default for DiagnosisSpec {
+    fn default() -> Self {
+        Self { threshold: 0.08 }
+    }
+}
+
 /// A vehicle profile file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -142,6 +155,9 @@ pub struct Profile {
     pub rate_hz: f64,
     pub model: ModelSpec,
     pub noise: NoiseSpec,
+    /// Decision settings calibrated for this vehicle on healthy Monte-Carlo flights.
+    #[serde(default)]
+    pub diagnosis: DiagnosisSpec,
     #[serde(rename = "actuator")]
     pub actuators: Vec<ActuatorSpec>,
 }
@@ -277,6 +293,9 @@ impl Profile {
         if !numbers || m.damping.iter().any(|d| *d < 0.0) {
             return Err("model: numbers must be finite and damping non-negative".into());
         }
+        if !(self.diagnosis.threshold.is_finite() && self.diagnosis.threshold > 0.0) {
+            return Err("diagnosis.threshold must be positive".into());
+        }
         let n = &self.noise;
         for (k, v) in [
             ("gyro", n.gyro),
@@ -300,13 +319,15 @@ impl Profile {
             if a.channel == 0 || a.channel > 32 {
                 return Err(format!("actuator `{}`: channel must be 1..32", a.name));
             }
-            if !(a.pwm_min < a.pwm_max) || !(a.pwm_min.is_finite() && a.pwm_max.is_finite()) {
+            let ordered = a.pwm_min < a.pwm_max && a.pwm_min.is_finite() && a.pwm_max.is_finite();
+            if !ordered {
                 return Err(format!(
                     "actuator `{}`: pwm_min must be below pwm_max",
                     a.name
                 ));
             }
-            if !a.role.is_range() && !(a.pwm_min < a.pwm_trim && a.pwm_trim < a.pwm_max) {
+            let trim_inside = a.pwm_min < a.pwm_trim && a.pwm_trim < a.pwm_max;
+            if !a.role.is_range() && !trim_inside {
                 return Err(format!(
                     "actuator `{}`: pwm_trim must lie between pwm_min and pwm_max",
                     a.name

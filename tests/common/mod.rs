@@ -19,7 +19,8 @@ pub fn python() -> PathBuf {
 }
 
 /// Run a reference script; a missing interpreter or package fails the test with the fix in the message.
-pub fn run_python(args: &[&str]) {
+/// Returns the script's standard output.
+pub fn run_python(args: &[&str]) -> String {
     let py = python();
     let out = Command::new(&py)
         .args(args)
@@ -33,11 +34,12 @@ pub fn run_python(args: &[&str]) {
         });
     assert!(
         out.status.success(),
-        "{} {:?} failed: {}\n(the reference needs filterpy==2.0.0 and numpy: `bash .ci/run` installs them into .venv)",
+        "{} {:?} failed: {}\n(the references need tests/reference/requirements.txt: `bash .ci/run` installs them into .venv)",
         py.display(),
         args,
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 pub fn temp_dir(name: &str) -> PathBuf {

@@ -1,0 +1,204 @@
+//! JSON-lines files (DESIGN.md "Files"): decisions, estimates and the simulator's truth. One
+//! object per line, flushed per line so a reader (or a crash) never sees half a record.
+
+use crate::diagnose::vehicle::Decision;
+use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
+use crate::eval::vehicle::StepSink;
+use crate::sim::vehicle::VehicleSample;
+use crate::telemetry::Profile;
+use serde::Serialize;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+pub struct JsonlWriter<W: Write> {
+    out: W,
+    pub lines: u64,
+}
+
+impl JsonlWriter<BufWriter<File>> {
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        Ok(Self::new(BufWriter::new(File::create(path)?)))
+    }
+}
+
+impl<W: Write> JsonlWriter<W> {
+    pub fn new(out: W) -> Self {
+        Self { out, lines: 0 }
+    }
+
+    pub fn write<T: Serialize>(&mut self, record: &T) -> std::io::Result<()> {
+        serde_json::to_writer(&mut self.out, record)?;
+        self.out.write_all(b"\n")?;
+        self.out.flush()?;
+        self.lines += 1;
+        Ok(())
+    }
+}
+
+#[derive(Debug, Serialize)]
+pub struct ActuatorEstimate<'a> {
+    pub name: &'a str,
+    pub channel: u8,
+    pub gamma: f64,
+    pub gamma_lo: f64,
+    pub gamma_hi: f64,
+    pub delta: f64,
+    pub delta_lo: f64,
+    pub delta_hi: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct EstimateRecord<'a> {
+    pub t: f64,
+    pub sysid: u8,
+    pub filter: &'static str,
+    pub actuators: Vec<ActuatorEstimate<'a>>,
+}
+
+impl<'a> EstimateRecord<'a> {
+    pub fn new(
+        t: f64,
+        sysid: u8,
+        filter: usize,
+        est: &[AhcEstimate],
+        profile: &'a Profile,
+    ) -> Self {
+        Self {
+            t,
+            sysid,
+            filter: FILTER_NAMES[filter],
+            actuators: est
+                .iter()
+                .zip(&profile.actuators)
+                .map(|(e, a)| ActuatorEstimate {
+                    name: &a.name,
+                    channel: a.channel,
+                    gamma: e.gamma,
+                    gamma_lo: e.gamma_lo,
+                    gamma_hi: e.gamma_hi,
+                    delta: e.delta,
+                    delta_lo: e.delta_lo,
+                    delta_hi: e.delta_hi,
+                })
+                .collect(),
+        }
+    }
+}
+
+#[derive(Debug, Serialize)]
+pub struct ActuatorTruth<'a> {
+    pub name: &'a str,
+    pub channel: u8,
+    pub gamma: f64,
+    pub delta: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct NoiseInForce {
+    /// Gyro noise std (rad/s) and a_z noise std (m/s²).
+    pub gyro: f64,
+    pub az: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct TruthRecord<'a> {
+    pub t: f64,
+    pub actuators: Vec<ActuatorTruth<'a>>,
+    pub noise: NoiseInForce,
+}
+
+impl<'a> TruthRecord<'a> {
+    pub fn new(s: &VehicleSample, profile: &'a Profile, noise: NoiseInForce) -> Self {
+        Self {
+            t: s.t,
+            actuators: profile
+                .actuators
+                .iter()
+                .enumerate()
+                .map(|(j, a)| ActuatorTruth {
+                    name: &a.name,
+                    channel: a.channel,
+                    gamma: s.gamma[j],
+                    delta: s.delta[j],
+                })
+                .collect(),
+            noise,
+        }
+    }
+}
+
+/// Decision and estimate files fed by a vehicle run; the first write error is kept and
+/// reported at the end (nothing panics, nothing is silently dropped).
+pub struct RunFiles {
+    pub decisions: Option<JsonlWriter<BufWriter<File>>>,
+    pub estimates: Option<JsonlWriter<BufWriter<File>>>,
+    /// The simulator's truth, with the sensor noise in force.
+    pub truth: Option<(JsonlWriter<BufWriter<File>>, f64, f64)>,
+    /// Write every k-th step's estimates.
+    pub decimate: u64,
+    pub sysid: u8,
+    steps: u64,
+    pub error: Option<std::io::Error>,
+}
+
+impl RunFiles {
+    pub fn new(
+        decisions: Option<&Path>,
+        estimates: Option<&Path>,
+        decimate: u64,
+    ) -> std::io::Result<Self> {
+        Ok(Self {
+            decisions: decisions.map(JsonlWriter::create).transpose()?,
+            estimates: estimates.map(JsonlWriter::create).transpose()?,
+            truth: None,
+            decimate: decimate.max(1),
+            sysid: 1,
+            steps: 0,
+            error: None,
+        })
+    }
+
+    /// Also write the truth file (`sim --truth`).
+    pub fn with_truth(mut self, path: &Path, gyro: f64, az: f64) -> std::io::Result<Self> {
+        self.truth = Some((JsonlWriter::create(path)?, gyro, az));
+        Ok(self)
+    }
+
+    fn keep(&mut self, r: std::io::Result<()>) {
+        if let (Err(e), None) = (r, &self.error) {
+            self.error = Some(e);
+        }
+    }
+}
+
+impl StepSink for RunFiles {
+    fn step(&mut self, s: &VehicleSample, est: &[&[AhcEstimate]; 2], profile: &Profile) {
+        self.steps += 1;
+        if let Some((w, gyro, az)) = self.truth.as_mut() {
+            let noise = NoiseInForce {
+                gyro: *gyro,
+                az: *az,
+            };
+            let r = w.write(&TruthRecord::new(s, profile, noise));
+            self.keep(r);
+        }
+        if (self.steps - 1) % self.decimate != 0 {
+            return;
+        }
+        if let Some(w) = self.estimates.as_mut() {
+            let mut r = Ok(());
+            for (f, e) in est.iter().enumerate() {
+                r = r.and(w.write(&EstimateRecord::new(s.t, self.sysid, f, e, profile)));
+            }
+            self.keep(r);
+        }
+    }
+
+    fn decision(&mut self, d: &Decision) {
+        if let Some(w) = self.decisions.as_mut() {
+            let r = w.write(d);
+            self.keep(r);
+        }
+    }
+}
