@@ -206,15 +206,10 @@ pub struct NamedScenario {
 impl Scenario {
     /// Parse and validate TOML text; `path` only names the source in errors.
     pub fn from_toml(text: &str, path: &str) -> Result<Self, ScenarioError> {
-        let scn: Scenario = toml::from_str(text).map_err(|e| {
-            let line = e.span().map_or(0, |s| {
-                text[..s.start.min(text.len())].matches('\n').count() + 1
-            });
-            ScenarioError::Parse {
-                path: path.to_string(),
-                line,
-                message: e.message().trim().replace('\n', " "),
-            }
+        let scn: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse {
+            path: path.to_string(),
+            line: crate::telemetry::profile::toml_error_line(text, &e),
+            message: e.message().trim().replace('\n', " "),
         })?;
         scn.validate().map_err(|message| ScenarioError::Invalid {
             path: path.to_string(),
