@@ -6,6 +6,7 @@
 pub mod diagnose;
 pub mod estimate;
 pub mod eval;
+pub mod link;
 pub mod model;
 pub mod output;
 pub mod scenario;

@@ -1,0 +1,254 @@
+//! MAVLink v1/v2 framing with our own drop counters.
+//!
+//! The `mavlink` crate's readers skip bad candidates silently (shared/mavlink.md §1.2), so we
+//! frame ourselves: check the magic, the length, the CRC with the dialect's CRC_EXTRA, and
+//! decode the payload with the generated dialect. Every byte or frame we drop is counted.
+
+use super::dialects::ahcmon::MavMessage;
+use mavlink_core::{MavlinkVersion, Message, calculate_crc};
+use serde::Serialize;
+use std::sync::LazyLock;
+
+pub const MAGIC_V1: u8 = 0xFE;
+pub const MAGIC_V2: u8 = 0xFD;
+/// Longest frame: v2 header 10 + payload 255 + CRC 2 + signature 13.
+pub const MAX_FRAME: usize = 280;
+
+/// One decoded MAVLink message with its header.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub version: MavlinkVersion,
+    pub sysid: u8,
+    pub compid: u8,
+    pub seq: u8,
+    pub msg_id: u32,
+    pub msg: MavMessage,
+}
+
+/// What was dropped and why. Reported at the end of every replay and in the monitor footer.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct FrameCounters {
+    /// Frames decoded.
+    pub frames: u64,
+    /// Times the reader lost sync (bad magic or CRC) and had to slide to the next magic byte.
+    pub resync: u64,
+    /// Bytes skipped while sliding.
+    pub skipped_bytes: u64,
+    /// Candidate frames with a known id and a wrong CRC.
+    pub bad_crc: u64,
+    /// Well-formed frames whose id our dialect does not know (skipped whole).
+    pub unknown_id: u64,
+    /// Frames with a good CRC whose payload did not decode (e.g. an enum value out of range).
+    pub parse_error: u64,
+    /// A record cut off by the end of the input.
+    pub truncated: u64,
+}
+
+impl FrameCounters {
+    pub fn dropped(&self) -> u64 {
+        self.bad_crc + self.unknown_id + self.parse_error + self.truncated
+    }
+
+    pub fn add(&mut self, o: &FrameCounters) {
+        self.frames += o.frames;
+        self.resync += o.resync;
+        self.skipped_bytes += o.skipped_bytes;
+        self.bad_crc += o.bad_crc;
+        self.unknown_id += o.unknown_id;
+        self.parse_error += o.parse_error;
+        self.truncated += o.truncated;
+    }
+}
+
+impl std::fmt::Display for FrameCounters {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "frames {} · resync {} ({} bytes skipped) · bad_crc {} · unknown_id {} · parse_error {} · truncated {}",
+            self.frames,
+            self.resync,
+            self.skipped_bytes,
+            self.bad_crc,
+            self.unknown_id,
+            self.parse_error,
+            self.truncated
+        )
+    }
+}
+
+/// The message ids of our dialect (all below 2^16), found once by asking the generated code.
+static KNOWN_IDS: LazyLock<Box<[u64; 1024]>> = LazyLock::new(|| {
+    let mut bits = Box::new([0u64; 1024]);
+    for id in 0..65536u32 {
+        if MavMessage::default_message_from_id(id).is_some() {
+            bits[(id / 64) as usize] |= 1 << (id % 64);
+        }
+    }
+    bits
+});
+
+pub fn is_known_id(id: u32) -> bool {
+    id < 65536 && KNOWN_IDS[(id / 64) as usize] & (1 << (id % 64)) != 0
+}
+
+/// Result of looking at the bytes at the start of a buffer.
+#[derive(Debug)]
+pub enum Parsed {
+    /// A frame, and its length in bytes.
+    Frame(Box<Frame>, usize),
+    /// The first byte is not a magic byte.
+    BadMagic,
+    /// The buffer ends before the frame would (this many bytes needed in all).
+    Incomplete(usize),
+    /// A known id whose CRC does not match.
+    BadCrc,
+    /// A complete frame (by length) with an id the dialect does not know; its length.
+    UnknownId(usize),
+    /// CRC good, payload did not decode; its length.
+    ParseError(usize),
+}
+
+/// Frame length from the header bytes (`b[0]` is the magic); None on a bad magic.
+pub fn frame_len(b: &[u8]) -> Option<Result<usize, usize>> {
+    let magic = *b.first()?;
+    if magic != MAGIC_V1 && magic != MAGIC_V2 {
+        return None;
+    }
+    // Need the length byte (and v2's incompat flags) before the length is known.
+    let head = if magic == MAGIC_V1 { 2 } else { 3 };
+    if b.len() < head {
+        return Some(Err(head));
+    }
+    let len = b[1] as usize;
+    Some(Ok(if magic == MAGIC_V1 {
+        6 + len + 2
+    } else {
+        let signed = b[2] & 0x01 != 0;
+        10 + len + 2 + if signed { 13 } else { 0 }
+    }))
+}
+
+/// Try to decode one frame at the start of `b`.
+pub fn parse(b: &[u8]) -> Parsed {
+    let total = match frame_len(b) {
+        None => return Parsed::BadMagic,
+        Some(Err(need)) => return Parsed::Incomplete(need),
+        Some(Ok(n)) => n,
+    };
+    if b.len() < total {
+        return Parsed::Incomplete(total);
+    }
+    let v1 = b[0] == MAGIC_V1;
+    let len = b[1] as usize;
+    let (header, seq, sysid, compid, msg_id) = if v1 {
+        (6, b[2], b[3], b[4], b[5] as u32)
+    } else {
+        let id = u32::from(b[7]) | u32::from(b[8]) << 8 | u32::from(b[9]) << 16;
+        (10, b[4], b[5], b[6], id)
+    };
+    if !is_known_id(msg_id) {
+        return Parsed::UnknownId(total);
+    }
+    let crc_end = header + len;
+    let crc = u16::from_le_bytes([b[crc_end], b[crc_end + 1]]);
+    if calculate_crc(&b[1..crc_end], MavMessage::extra_crc(msg_id)) != crc {
+        return Parsed::BadCrc;
+    }
+    let version = if v1 {
+        MavlinkVersion::V1
+    } else {
+        MavlinkVersion::V2
+    };
+    match MavMessage::parse(version, msg_id, &b[header..crc_end]) {
+        Ok(msg) => Parsed::Frame(
+            Box::new(Frame {
+                version,
+                sysid,
+                compid,
+                seq,
+                msg_id,
+                msg,
+            }),
+            total,
+        ),
+        Err(_) => Parsed::ParseError(total),
+    }
+}
+
+/// Serialise one message as a v2 frame into `out` (cleared first).
+pub fn encode_v2(sysid: u8, compid: u8, seq: u8, msg: &MavMessage, out: &mut Vec<u8>) {
+    out.clear();
+    let header = mavlink_core::MavHeader {
+        system_id: sysid.into(),
+        component_id: compid,
+        sequence: seq,
+    };
+    // Writing into a Vec cannot fail.
+    let _ = mavlink_core::write_v2_msg(out, header, msg);
+}
+
+/// A byte-stream framer for live links (UDP datagrams, TCP, serial): no timestamps.
+#[derive(Debug, Default)]
+pub struct StreamFramer {
+    buf: Vec<u8>,
+    syncing: bool,
+    pub counters: FrameCounters,
+}
+
+impl StreamFramer {
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.buf.extend_from_slice(bytes);
+    }
+
+    /// Next frame in the buffered bytes; None when more bytes are needed.
+    pub fn next_frame(&mut self) -> Option<Frame> {
+        let mut pos = 0;
+        let mut out = None;
+        while pos < self.buf.len() {
+            match parse(&self.buf[pos..]) {
+                Parsed::Frame(f, n) => {
+                    pos += n;
+                    self.syncing = false;
+                    self.counters.frames += 1;
+                    out = Some(*f);
+                    break;
+                }
+                Parsed::Incomplete(_) => break,
+                Parsed::UnknownId(n) => {
+                    pos += n;
+                    self.syncing = false;
+                    self.counters.unknown_id += 1;
+                }
+                Parsed::ParseError(n) => {
+                    pos += n;
+                    self.counters.parse_error += 1;
+                }
+                Parsed::BadCrc => {
+                    self.counters.bad_crc += 1;
+                    self.slide(&mut pos);
+                }
+                Parsed::BadMagic => self.slide(&mut pos),
+            }
+        }
+        self.buf.drain(..pos);
+        out
+    }
+
+    fn slide(&mut self, pos: &mut usize) {
+        if !self.syncing {
+            self.counters.resync += 1;
+            self.syncing = true;
+        }
+        self.counters.skipped_bytes += 1;
+        *pos += 1;
+    }
+
+    /// End of a datagram: a partial frame left over cannot complete (UDP keeps boundaries).
+    pub fn end_datagram(&mut self) {
+        if !self.buf.is_empty() {
+            self.counters.truncated += 1;
+            self.counters.skipped_bytes += self.buf.len() as u64;
+            self.buf.clear();
+        }
+    }
+}
