@@ -2,8 +2,12 @@
 
 use ahcmon::eval::vehicle::{run_vehicle_scenario, sim_config};
 use ahcmon::eval::{EvalError, Run, aggregate, run_scenario};
-use ahcmon::output::jsonl::RunFiles;
-use ahcmon::output::{svg, table};
+use ahcmon::link::TlogReader;
+use ahcmon::monitor::Monitor;
+use ahcmon::output::jsonl::{MonitorFiles, RunFiles};
+use ahcmon::output::{summary, svg, table};
+use ahcmon::pipeline::PipelineConfig;
+use ahcmon::telemetry::{Profile, ProfileError};
 use ahcmon::scenario::{self, NamedScenario, ScenarioError};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
@@ -67,12 +71,82 @@ enum Command {
         #[arg(long)]
         seed: Option<u64>,
     },
+    /// Replay a telemetry log (.tlog from any ground station) through both filters and the
+    /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
+    /// decisions, and counts of everything dropped).
+    Replay {
+        /// The .tlog file.
+        file: PathBuf,
+        #[command(flatten)]
+        run: RunArgs,
+        /// Replay at this multiple of real time instead of as fast as possible.
+        #[arg(long, value_name = "X", conflicts_with = "fast")]
+        speed: Option<f64>,
+        /// As fast as the CPU goes (the default).
+        #[arg(long)]
+        fast: bool,
+        /// No dashboard (the dashboard is not built yet: replay is always headless for now).
+        #[arg(long)]
+        headless: bool,
+    },
+}
+
+/// Options shared by `replay` and `monitor`.
+#[derive(clap::Args, Debug)]
+struct RunArgs {
+    /// Vehicle profile, built-in name (paper-heli, heli-h3-120, quad-plus, quad-x, hexa-x,
+    /// plane) or TOML file. Default: chosen from the vehicle's HEARTBEAT and parameters.
+    #[arg(long, value_name = "NAME|FILE")]
+    profile: Option<String>,
+    /// Decisions JSONL (one object a line).
+    #[arg(long, value_name = "FILE")]
+    decisions: Option<PathBuf>,
+    /// Estimates JSONL (both filters, every actuator, every step).
+    #[arg(long, value_name = "FILE")]
+    estimates: Option<PathBuf>,
+    /// Write every k-th step's estimates.
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    decimate: u64,
+    /// End the healthy calibration stretch at this vehicle time (s since boot, as in the
+    /// decisions' `t`); default: the first 20 s after take-off.
+    #[arg(long, value_name = "T")]
+    calibrate_until: Option<f64>,
+}
+
+impl RunArgs {
+    fn pipeline_config(&self) -> anyhow::Result<PipelineConfig> {
+        let profile = self
+            .profile
+            .as_deref()
+            .map(Profile::resolve)
+            .transpose()?;
+        if let Some(t) = self.calibrate_until
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(UsageError(format!("--calibrate-until {t}: must be a positive time in s")).into());
+        }
+        Ok(PipelineConfig {
+            profile,
+            calibrate_until: self.calibrate_until,
+            ..PipelineConfig::default()
+        })
+    }
+
+    fn files(&self) -> anyhow::Result<MonitorFiles> {
+        MonitorFiles::new(self.decisions.as_deref(), self.estimates.as_deref(), self.decimate)
+            .context("cannot create output file")
+    }
 }
 
 /// Errors that are the user's input (exit code 2) rather than ours (exit code 1).
 fn is_input_error(e: &anyhow::Error) -> bool {
-    e.chain()
-        .any(|c| c.is::<ScenarioError>() || c.is::<UsageError>() || c.is::<EvalError>())
+    e.chain().any(|c| {
+        c.is::<ScenarioError>()
+            || c.is::<UsageError>()
+            || c.is::<EvalError>()
+            || c.is::<ProfileError>()
+            || c.is::<InputFileError>()
+    })
 }
 
 fn main() -> ExitCode {
@@ -134,7 +208,69 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             run_with_files(&named, seed.unwrap_or(named.scenario.seed), files, true)
         }
+        Command::Replay {
+            file,
+            run,
+            speed,
+            fast: _,
+            headless: _,
+        } => replay(&file, &run, speed),
     }
+}
+
+/// An input file that cannot be read (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {source}")]
+struct InputFileError {
+    path: String,
+    source: std::io::Error,
+}
+
+fn replay(file: &std::path::Path, args: &RunArgs, speed: Option<f64>) -> anyhow::Result<()> {
+    if let Some(x) = speed
+        && !(x.is_finite() && x > 0.0)
+    {
+        return Err(UsageError(format!("--speed {x}: must be a positive multiple of real time")).into());
+    }
+    let input_error = |source| InputFileError {
+        path: file.display().to_string(),
+        source,
+    };
+    let size = std::fs::metadata(file).map_err(input_error)?.len();
+    let mut reader = TlogReader::open(file).map_err(input_error)?;
+    let mut monitor = Monitor::new(args.pipeline_config()?);
+    let mut files = args.files()?;
+    let progress = std::io::stderr().is_terminal();
+    let started = std::time::Instant::now();
+    let mut first_ts = None;
+    let mut shown = 0;
+    while let Some((ts, frame)) = reader.next_frame().map_err(input_error)? {
+        if let Some(x) = speed {
+            let t0 = *first_ts.get_or_insert(ts);
+            let due = std::time::Duration::from_secs_f64(ts.saturating_sub(t0) as f64 * 1e-6 / x);
+            if let Some(wait) = due.checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        monitor.on_frame(&frame, &mut files);
+        if progress && size > 0 {
+            let pct = (reader.position() * 100 / size) as usize;
+            if pct != shown {
+                shown = pct;
+                eprint!("\rreplay: {pct:3}% [{:<40}]", "#".repeat(pct * 40 / 100));
+            }
+        }
+    }
+    monitor.finish(&mut files);
+    if progress {
+        eprint!("\r{:60}\r", "");
+    }
+    if let Some(e) = files.error.take() {
+        return Err(anyhow::Error::new(e).context("writing JSON lines"));
+    }
+    print!("{}", summary::render(&monitor, &reader.counters, &files.seen));
+    println!("replayed {} in {:.2} s", file.display(), started.elapsed().as_secs_f64());
+    Ok(())
 }
 
 /// A mistake in how the command line combines things (exit code 2).

@@ -93,6 +93,20 @@ pub enum Event {
     FilterReset,
 }
 
+impl Event {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Fault => "fault",
+            Self::Changed => "changed",
+            Self::Cleared => "cleared",
+            Self::LinkLost => "link_lost",
+            Self::LinkRestored => "link_restored",
+            Self::ExcitationLow => "excitation_low",
+            Self::FilterReset => "filter_reset",
+        }
+    }
+}
+
 /// One decision, as written to the decisions JSONL (DESIGN.md "Files").
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Decision {

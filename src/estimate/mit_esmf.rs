@@ -128,6 +128,8 @@ pub struct MitEsmf<Mo, const N: usize, const M: usize> {
     pub sensitivity: ShapeSensitivity<N>,
     pub schedule: StepSchedule,
     pub q0: SVector<f64, N>,
+    /// Entries the adaptation leaves at q0 (see `MitUkf::fixed`).
+    pub fixed: [bool; N],
     pub gradient: SVector<f64, N>,
     steps: u64,
 }
@@ -148,6 +150,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
             sensitivity: ShapeSensitivity::new(),
             schedule: StepSchedule::new(),
             q0,
+            fixed: [false; N],
             gradient: SVector::zeros(),
             steps: 0,
         }
@@ -199,7 +202,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
         if self.steps as usize > self.adapt.window {
             let eta = self.schedule.eta(&self.adapt);
             let loss = (1.0 - self.esmf.last.consistency) * self.esmf.p.trace();
-            for i in 0..N {
+            for i in (0..N).filter(|&i| !self.fixed[i]) {
                 let q = self.esmf.process_noise[i];
                 self.esmf.process_noise[i] =
                     log_step(q, self.gradient[i], eta, loss, self.q0[i], &self.adapt);

@@ -25,6 +25,10 @@ pub struct MitUkf<Mo, const N: usize, const M: usize, const S: usize> {
     pub schedule: StepSchedule,
     /// Initial process noise: the reference for the projection box.
     pub q0: SVector<f64, N>,
+    /// Entries the adaptation leaves at q0 (a fault mode the prior rules out, e.g. a motor's
+    /// offset: letting a transient inflate it moves the estimate along the direction the
+    /// data cannot see).
+    pub fixed: [bool; N],
     /// Last gradient ∂J/∂q (for inspection and tests).
     pub gradient: SVector<f64, N>,
     steps: u64,
@@ -47,6 +51,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
             sensitivity: Sensitivity::new(),
             schedule: StepSchedule::new(),
             q0,
+            fixed: [false; N],
             gradient: SVector::zeros(),
             steps: 0,
         }
@@ -82,7 +87,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         // Warm-up: no adaptation until the window is full.
         if self.window.is_full() {
             let eta = self.schedule.eta(&self.adapt);
-            for i in 0..N {
+            for i in (0..N).filter(|&i| !self.fixed[i]) {
                 let q = self.ukf.process_noise[i];
                 self.ukf.process_noise[i] =
                     gn_step(q, grad[i], curv[i], eta, self.q0[i], &self.adapt);

@@ -68,6 +68,11 @@ pub trait VehicleFilters: Send {
     fn reset(&mut self, filter: usize);
 }
 
+/// Delta of range outputs (motors, throttle): random-walk std and prior std, as fractions of
+/// the profile's (see `FilterSetup::from_profile`).
+const RANGE_DELTA_Q_SCALE: f64 = 0.1;
+const RANGE_DELTA_P0_SCALE: f64 = 0.2;
+
 /// The filter set-up a profile implies.
 #[derive(Debug, Clone)]
 pub struct FilterSetup<const N: usize, const M: usize> {
@@ -79,6 +84,8 @@ pub struct FilterSetup<const N: usize, const M: usize> {
     pub set_p0: SMatrix<f64, N, N>,
     pub set_q: SVector<f64, N>,
     pub set_r: SMatrix<f64, M, M>,
+    /// Process-noise entries the MIT rules leave alone (the deltas of range outputs).
+    pub fixed: [bool; N],
 }
 
 impl<const N: usize, const M: usize> FilterSetup<N, M> {
@@ -95,10 +102,24 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             std_p0[i] = INITIAL_STD[0];
         }
         for j in 0..l {
+            // A motor or throttle (range output, normalised from its PWM minimum) that loses
+            // thrust loses gain; an offset there is rare. Giving its delta a tenth of the
+            // random walk and a fifth of the prior spread makes a hover, where only the
+            // effective output is identifiable, attribute a change to gamma.
+            let range = profile.actuators[j].role.is_range();
+            let (q_scale, p0_scale) = if range {
+                (RANGE_DELTA_Q_SCALE, RANGE_DELTA_P0_SCALE)
+            } else {
+                (1.0, 1.0)
+            };
             std_q[3 + j] = noise.gamma_process * rate_scale;
-            std_q[3 + l + j] = noise.delta_process * rate_scale;
+            std_q[3 + l + j] = noise.delta_process * rate_scale * q_scale;
             std_p0[3 + j] = INITIAL_STD[1];
-            std_p0[3 + l + j] = INITIAL_STD[2];
+            std_p0[3 + l + j] = INITIAL_STD[2] * p0_scale;
+        }
+        let mut fixed = [false; N];
+        for j in 0..l {
+            fixed[3 + l + j] = profile.actuators[j].role.is_range();
         }
         let mut std_r = SVector::<f64, M>::zeros();
         for i in 0..3 {
@@ -117,6 +138,7 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             set_p0: SMatrix::from_diagonal(&(std_p0.component_mul(&std_p0) * 9.0 * n)),
             set_q: std_q.component_mul(&std_q) * 9.0 * n,
             set_r: SMatrix::from_diagonal(&(std_r.component_mul(&std_r) * 9.0 * m)),
+            fixed,
             model,
         })
     }
@@ -140,7 +162,7 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
     }
 
     fn new_ukf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitUkf<RateModel<N, M>, N, M, S> {
-        MitUkf::new(
+        let mut f = MitUkf::new(
             s.model,
             UkfParams::default(),
             adapt,
@@ -148,11 +170,13 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             s.kalman_p0,
             s.kalman_q,
             s.kalman_r,
-        )
+        );
+        f.fixed = s.fixed;
+        f
     }
 
     fn new_esmf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitEsmf<RateModel<N, M>, N, M> {
-        MitEsmf::new(
+        let mut f = MitEsmf::new(
             s.model,
             EsmfParams::default(),
             adapt,
@@ -160,7 +184,9 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             s.set_p0,
             s.set_q,
             s.set_r,
-        )
+        );
+        f.fixed = s.fixed;
+        f
     }
 }
 

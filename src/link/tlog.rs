@@ -26,6 +26,8 @@ pub struct TlogReader<R: Read> {
     syncing: bool,
     tail_cut: bool,
     last_ts: Option<u64>,
+    /// Bytes dropped from the front of `buf` so far (for progress).
+    base: u64,
     pub counters: FrameCounters,
 }
 
@@ -45,12 +47,19 @@ impl<R: Read> TlogReader<R> {
             syncing: false,
             tail_cut: false,
             last_ts: None,
+            base: 0,
             counters: FrameCounters::default(),
         }
     }
 
+    /// Bytes of the input consumed so far.
+    pub fn position(&self) -> u64 {
+        self.base + self.pos as u64
+    }
+
     fn fill(&mut self) -> io::Result<()> {
         if self.pos > 0 {
+            self.base += self.pos as u64;
             self.buf.drain(..self.pos);
             self.pos = 0;
         }

@@ -185,3 +185,176 @@ fn least_squares(x: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, f6
     let r2 = if tss > 0.0 { 1.0 - rss / tss } else { 1.0 };
     Some((beta, r2, (rss / (n - x.ncols() as f64).max(1.0)).sqrt()))
 }
+
+/// Which parts of a [`calibrate_scaled`] fit came from the data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScaledFit {
+    pub params: RateParams,
+    pub quality: FitQuality,
+    /// Per axis (roll, pitch, yaw, then a_z when measured): the geometry's gain was rescaled
+    /// and `D` identified (true), or only the offset was fitted to the profile's `D`/`G`
+    /// because the stretch did not excite that axis (false).
+    pub scaled: Vec<bool>,
+    /// Per axis: the factor applied to the profile's `G` row.
+    pub scale: Vec<f64>,
+}
+
+/// Identify a vehicle's magnitudes against a profile's geometry: per axis, one gain factor on
+/// the profile's `G` row, the damping and the offset (`omega_{k+1} = a omega_k + h (s G_i u +
+/// c_i)`, instrumental variables as in [`calibrate`]). Far better conditioned than a free `G`:
+/// an autopilot's own controller moves the actuators together along its axes, which a free
+/// fit cannot separate. An axis the stretch does not excite (steady hover) keeps the profile's
+/// `D` and `G` and gets only its offset `c`, which any stretch determines.
+pub fn calibrate_scaled(
+    samples: &[CalibrationSample],
+    dt: f64,
+    base: &RateParams,
+) -> Result<ScaledFit, CalibrationError> {
+    let l = base.actuators();
+    let need = 50;
+    if samples.len() < need + 2 {
+        return Err(CalibrationError::TooFew {
+            got: samples.len(),
+            need: need + 2,
+            l,
+        });
+    }
+    let ok = samples.iter().all(|s| {
+        s.u.len() == l
+            && s.rates.iter().all(|v| v.is_finite())
+            && s.u.iter().all(|v| v.is_finite())
+            && s.az.is_none_or(f64::is_finite)
+    });
+    if !ok {
+        return Err(CalibrationError::NonFinite);
+    }
+    let n = samples.len() - 2;
+    let mut params = base.clone();
+    let mut quality = FitQuality {
+        r_squared: vec![],
+        residual_std: vec![],
+        samples: n,
+    };
+    let mut scaled = vec![];
+    let mut scale = vec![];
+    let drive = |axis: usize, u: &[f64]| -> f64 {
+        (0..l).map(|j| base.effectiveness[j][axis] * u[j]).sum()
+    };
+    for axis in 0..3 {
+        let mut x = DMatrix::<f64>::zeros(n, 3);
+        let mut z = DMatrix::<f64>::zeros(n, 3);
+        let mut y = DVector::<f64>::zeros(n);
+        for r in 0..n {
+            let k = r + 1;
+            let g = drive(axis, samples[k + 1].u);
+            x[(r, 0)] = samples[k].rates[axis];
+            z[(r, 0)] = samples[k - 1].rates[axis];
+            x[(r, 1)] = g;
+            z[(r, 1)] = g;
+            x[(r, 2)] = 1.0;
+            z[(r, 2)] = 1.0;
+            y[r] = samples[k + 1].rates[axis];
+        }
+        let fitted = instrumental(&x, &z, &y).and_then(|(beta, r2, sd)| {
+            let a = beta[0];
+            if !(a > 0.0 && a < 1.0) {
+                return None;
+            }
+            let d = -a.ln() / dt;
+            let hold = (1.0 - a) / d;
+            let s = beta[1] / hold;
+            // A factor far from the geometry's is an unexcited axis fitting noise.
+            (0.1..=10.0)
+                .contains(&s)
+                .then_some((d, s, beta[2] / hold, r2, sd))
+        });
+        match fitted {
+            Some((d, s, c, r2, sd)) => {
+                params.damping[axis] = d;
+                for col in params.effectiveness.iter_mut() {
+                    col[axis] *= s;
+                }
+                params.offset[axis] = c;
+                quality.r_squared.push(r2);
+                quality.residual_std.push(sd);
+                scaled.push(true);
+                scale.push(s);
+            }
+            None => {
+                // Offset only, on the profile's D and G.
+                let d = base.damping[axis];
+                let a = (-d * dt).exp();
+                let hold = if d * dt > 1e-12 { (1.0 - a) / d } else { dt };
+                let mut sum = 0.0;
+                for k in 0..n + 1 {
+                    let s0 = &samples[k];
+                    let s1 = &samples[k + 1];
+                    sum += (s1.rates[axis] - a * s0.rates[axis]) / hold - drive(axis, s1.u);
+                }
+                let c = sum / (n + 1) as f64;
+                params.offset[axis] = c;
+                let mut rss = 0.0;
+                let mut tss = 0.0;
+                let mean = samples.iter().map(|s| s.rates[axis]).sum::<f64>() / samples.len() as f64;
+                for k in 0..n + 1 {
+                    let (s0, s1) = (&samples[k], &samples[k + 1]);
+                    let pred = a * s0.rates[axis] + hold * (drive(axis, s1.u) + c);
+                    rss += (s1.rates[axis] - pred).powi(2);
+                    tss += (s1.rates[axis] - mean).powi(2);
+                }
+                quality
+                    .r_squared
+                    .push(if tss > 0.0 { 1.0 - rss / tss } else { 1.0 });
+                quality.residual_std.push((rss / n as f64).sqrt());
+                scaled.push(false);
+                scale.push(1.0);
+            }
+        }
+    }
+    let with_az: Vec<_> = samples.iter().filter_map(|s| s.az.map(|a| (a, s.u))).collect();
+    if !with_az.is_empty() && base.vertical.len() == l {
+        let gz = |u: &[f64]| -> f64 { (0..l).map(|j| base.vertical[j] * u[j]).sum() };
+        let mut x = DMatrix::<f64>::zeros(with_az.len(), 2);
+        let mut y = DVector::<f64>::zeros(with_az.len());
+        for (k, (a, u)) in with_az.iter().enumerate() {
+            x[(k, 0)] = gz(u);
+            x[(k, 1)] = 1.0;
+            y[k] = *a;
+        }
+        let fitted = least_squares(&x, &y)
+            .filter(|(beta, _, _)| (0.1..=10.0).contains(&beta[0]));
+        match fitted {
+            Some((beta, r2, sd)) => {
+                for v in params.vertical.iter_mut() {
+                    *v *= beta[0];
+                }
+                params.vertical_offset = beta[1];
+                quality.r_squared.push(r2);
+                quality.residual_std.push(sd);
+                scaled.push(true);
+                scale.push(beta[0]);
+            }
+            None => {
+                let c = with_az.iter().map(|(a, u)| a - gz(u)).sum::<f64>() / with_az.len() as f64;
+                params.vertical_offset = c;
+                let mean = with_az.iter().map(|(a, _)| a).sum::<f64>() / with_az.len() as f64;
+                let rss: f64 = with_az.iter().map(|(a, u)| (a - gz(u) - c).powi(2)).sum();
+                let tss: f64 = with_az.iter().map(|(a, _)| (a - mean).powi(2)).sum();
+                quality
+                    .r_squared
+                    .push(if tss > 0.0 { 1.0 - rss / tss } else { 1.0 });
+                quality
+                    .residual_std
+                    .push((rss / with_az.len() as f64).sqrt());
+                scaled.push(false);
+                scale.push(1.0);
+            }
+        }
+    }
+    Ok(ScaledFit {
+        params,
+        quality,
+        scaled,
+        scale,
+    })
+}

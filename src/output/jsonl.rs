@@ -202,3 +202,101 @@ impl StepSink for RunFiles {
         }
     }
 }
+
+/// Decision and estimate files of a replay or live monitor (any number of vehicles), with the
+/// decisions and progress lines also printed for the user.
+pub struct MonitorFiles {
+    pub decisions: Option<JsonlWriter<BufWriter<File>>>,
+    pub estimates: Option<JsonlWriter<BufWriter<File>>>,
+    pub decimate: u64,
+    steps: std::collections::BTreeMap<u8, u64>,
+    /// Print decisions to stdout and messages to stderr.
+    pub echo: bool,
+    pub error: Option<std::io::Error>,
+    /// All decisions seen (for summaries and tests).
+    pub seen: Vec<Decision>,
+}
+
+impl MonitorFiles {
+    pub fn new(decisions: Option<&Path>, estimates: Option<&Path>, decimate: u64) -> std::io::Result<Self> {
+        Ok(Self {
+            decisions: decisions.map(JsonlWriter::create).transpose()?,
+            estimates: estimates.map(JsonlWriter::create).transpose()?,
+            decimate: decimate.max(1),
+            steps: Default::default(),
+            echo: true,
+            error: None,
+            seen: vec![],
+        })
+    }
+
+    fn keep(&mut self, r: std::io::Result<()>) {
+        if let (Err(e), None) = (r, &self.error) {
+            self.error = Some(e);
+        }
+    }
+}
+
+/// One line for a person: `t=112.90 s sysid 1 fault motor1 (ch 1) loss_of_effectiveness ...`.
+pub fn describe(d: &Decision) -> String {
+    let mut s = format!("t={:8.2} s  sysid {}  {}", d.t, d.sysid, d.event.as_str());
+    if let Some(a) = &d.actuator {
+        s += &format!("  {a}");
+        if let Some(c) = d.channel {
+            s += &format!(" (ch {c})");
+        }
+    }
+    if let Some(c) = d.class {
+        s += &format!("  {}", c.as_str());
+    }
+    if let (Some(g), Some(b)) = (d.gamma, d.gamma_bounds) {
+        s += &format!("  gamma {g:.2} [{:.2}, {:.2}]", b[0], b[1]);
+    }
+    if let (Some(g), Some(b)) = (d.delta, d.delta_bounds) {
+        s += &format!("  delta {g:+.3} [{:+.3}, {:+.3}]", b[0], b[1]);
+    }
+    if !d.filters.is_empty() {
+        s += &format!("  by {}", d.filters.join("+"));
+    }
+    if !d.also.is_empty() {
+        s += &format!("  also {}", d.also.join(","));
+    }
+    if let Some(x) = &d.detail {
+        s += &format!("  ({x})");
+    }
+    s
+}
+
+impl crate::pipeline::PipelineSink for MonitorFiles {
+    fn decision(&mut self, d: &Decision, _profile: &Profile) {
+        if self.echo {
+            println!("{}", describe(d));
+        }
+        if let Some(w) = self.decisions.as_mut() {
+            let r = w.write(d);
+            self.keep(r);
+        }
+        self.seen.push(d.clone());
+    }
+
+    fn estimates(&mut self, t: f64, sysid: u8, est: &[&[AhcEstimate]; 2], profile: &Profile) {
+        let k = self.steps.entry(sysid).or_insert(0);
+        *k += 1;
+        if (*k - 1) % self.decimate != 0 {
+            return;
+        }
+        if let Some(w) = self.estimates.as_mut() {
+            let mut r = Ok(());
+            for (f, e) in est.iter().enumerate() {
+                r = r.and(w.write(&EstimateRecord::new(t, sysid, f, e, profile)));
+            }
+            self.keep(r);
+        }
+    }
+
+    fn message(&mut self, sysid: u8, text: &str) {
+        if self.echo {
+            eprintln!("sysid {sysid}: {text}");
+        }
+    }
+}

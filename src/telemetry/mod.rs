@@ -1,5 +1,8 @@
 //! Frames → samples per vehicle, and the vehicle profiles that say how to read them.
 
+pub mod assembler;
+pub mod detect;
 pub mod profile;
 
+pub use assembler::{Assembler, AssemblerConfig, TelemetryCounters, TelemetrySample, VehicleAssembler, VehicleInfo};
 pub use profile::{Profile, ProfileError, Role, VehicleKind};

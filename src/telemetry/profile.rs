@@ -10,7 +10,7 @@ use std::path::Path;
 use thiserror::Error;
 
 /// What an actuator is; decides the normalisation and the geometry of its `G` column.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Role {
     Motor,

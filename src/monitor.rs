@@ -1,0 +1,63 @@
+//! Frames of any number of vehicles → per-vehicle telemetry → per-vehicle pipelines. Pure:
+//! the tlog replay, the live monitor and the tests feed it frames.
+
+use crate::link::Frame;
+use crate::pipeline::{PipelineConfig, PipelineSink, VehiclePipeline};
+use crate::telemetry::{Assembler, AssemblerConfig};
+use std::collections::BTreeMap;
+
+pub struct Monitor {
+    pub assembler: Assembler,
+    samples: Vec<crate::telemetry::TelemetrySample>,
+    pub pipelines: BTreeMap<u8, VehiclePipeline>,
+    cfg: PipelineConfig,
+}
+
+impl Monitor {
+    pub fn new(cfg: PipelineConfig) -> Self {
+        Self {
+            assembler: Assembler::new(AssemblerConfig::default()),
+            samples: Vec::with_capacity(4),
+            pipelines: BTreeMap::new(),
+            cfg,
+        }
+    }
+
+    pub fn on_frame(&mut self, frame: &Frame, sink: &mut dyn PipelineSink) {
+        self.samples.clear();
+        self.assembler
+            .on_frame(frame.sysid, frame.compid, &frame.msg, &mut self.samples);
+        self.run(frame.sysid, sink);
+    }
+
+    /// End of input: samples still waiting for their a_z are processed without it.
+    pub fn finish(&mut self, sink: &mut dyn PipelineSink) {
+        let ids: Vec<u8> = self.assembler.vehicles.keys().copied().collect();
+        for sysid in ids {
+            self.samples.clear();
+            if let Some(v) = self.assembler.vehicles.get_mut(&sysid) {
+                v.flush(&mut self.samples);
+            }
+            self.run(sysid, sink);
+        }
+    }
+
+    fn run(&mut self, sysid: u8, sink: &mut dyn PipelineSink) {
+        if self.samples.is_empty() {
+            return;
+        }
+        let Some(vehicle) = self.assembler.vehicles.get_mut(&sysid) else {
+            return;
+        };
+        let pipeline = self
+            .pipelines
+            .entry(sysid)
+            .or_insert_with(|| VehiclePipeline::new(sysid, self.cfg.clone()));
+        for sample in &self.samples {
+            if std::mem::take(&mut vehicle.rebooted) {
+                pipeline.reset(sample.t, sink);
+            }
+            pipeline.on_sample(sample, &vehicle.info, sink);
+        }
+    }
+}

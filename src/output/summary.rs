@@ -1,0 +1,85 @@
+//! The end-of-run summary of a replay or monitor session: per vehicle and actuator the final
+//! estimates with bounds, the decisions, and every counter of what was dropped.
+
+use crate::estimate::vehicle::FILTER_NAMES;
+use crate::link::FrameCounters;
+use crate::monitor::Monitor;
+use std::fmt::Write;
+
+pub fn render(monitor: &Monitor, frames: &FrameCounters, decisions: &[crate::diagnose::vehicle::Decision]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "link: {frames}");
+    if monitor.assembler.vehicles.is_empty() {
+        let _ = writeln!(s, "no vehicle seen (no autopilot HEARTBEAT, ATTITUDE or SERVO_OUTPUT_RAW)");
+    }
+    for (sysid, v) in &monitor.assembler.vehicles {
+        let c = &v.counters;
+        let _ = writeln!(
+            s,
+            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots, {} non-finite",
+            v.info
+                .mav_type
+                .map_or("unknown".to_string(), |t| format!("{t:?}").trim_start_matches("MAV_TYPE_").to_lowercase()),
+            c.samples,
+            c.unmatched,
+            c.out_of_order,
+            c.duplicates,
+            c.reboots,
+            c.non_finite
+        );
+        let Some(p) = monitor.pipelines.get(sysid) else {
+            let _ = writeln!(s, "  no complete samples (rates and outputs of the same instant)");
+            continue;
+        };
+        let pc = &p.counters;
+        let _ = writeln!(
+            s,
+            "  pipeline: {}; {} filter steps, {} gaps, {} filter resets, {} samples without a_z",
+            p.stage_name(),
+            pc.steps,
+            pc.gaps,
+            pc.filter_errors,
+            pc.missing_az
+        );
+        if let Some(d) = &p.detection {
+            let _ = writeln!(s, "  profile: {}", d.source);
+        }
+        let (Some(profile), Some((t, est))) = (p.profile(), &p.last) else {
+            continue;
+        };
+        let _ = writeln!(s, "  final estimates at t={t:.2} s:");
+        let _ = writeln!(
+            s,
+            "    {:<10} {:>3}  {:<8} {:>24} {:>27}  {:>17}  {:>9}  {}",
+            "actuator", "ch", "filter", "gamma [bounds]", "delta [bounds]", "q_gamma q_delta", "decisions", "state"
+        );
+        for (j, a) in profile.actuators.iter().enumerate() {
+            let n = decisions
+                .iter()
+                .filter(|d| d.sysid == *sysid && d.actuator.as_deref() == Some(a.name.as_str()))
+                .count();
+            let state = p.active[j].map_or("healthy", |c| c.as_str());
+            for (f, name) in FILTER_NAMES.iter().enumerate() {
+                let e = est[f][j];
+                let _ = writeln!(
+                    s,
+                    "    {:<10} {:>3}  {:<8} {:>6.3} [{:>6.3}, {:>6.3}] {:>+7.3} [{:>+7.3}, {:>+7.3}]  {:>8.1e} {:>8.1e}  {:>9}  {}",
+                    if f == 0 { a.name.as_str() } else { "" },
+                    if f == 0 { a.channel.to_string() } else { String::new() },
+                    name,
+                    e.gamma,
+                    e.gamma_lo,
+                    e.gamma_hi,
+                    e.delta,
+                    e.delta_lo,
+                    e.delta_hi,
+                    e.q_gamma,
+                    e.q_delta,
+                    if f == 0 { n.to_string() } else { String::new() },
+                    if f == 0 { state } else { "" }
+                );
+            }
+        }
+    }
+    s
+}

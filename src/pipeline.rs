@@ -1,0 +1,422 @@
+//! One vehicle's processing, from telemetry samples to estimates and decisions. Pure: no I/O,
+//! no clocks; replay, the live monitor and tests drive it the same way.
+//!
+//! Stages: on the ground nothing is estimated (ground contact is not in the model). Once the
+//! vehicle is airborne and has settled, a healthy stretch (`calibrate_s`, or up to
+//! `--calibrate-until`) identifies the vehicle's magnitudes against the profile's geometry
+//! ([`calibrate_scaled`]); then both filters and the diagnosis run on every sample.
+
+use crate::diagnose::vehicle::{Decision, DiagnosisParams, Diagnoser, Event};
+use crate::estimate::vehicle::{AhcEstimate, VehicleFilters, build};
+use crate::model::MAX_ACTUATORS;
+use crate::model::calibrate::{CalibrationSample, ScaledFit, calibrate_scaled};
+use crate::telemetry::detect::{Detection, detect};
+use crate::telemetry::{Profile, TelemetrySample, VehicleInfo};
+
+#[derive(Debug, Clone)]
+pub struct PipelineConfig {
+    /// `--profile`: used as given, no detection.
+    pub profile: Option<Profile>,
+    pub diagnosis: DiagnosisParams,
+    /// Height above home (m) that counts as airborne, when the vehicle reports it.
+    pub airborne_alt_m: f64,
+    /// Without a height: armed this long counts as airborne.
+    pub armed_airborne_s: f64,
+    /// Time after take-off before the healthy stretch starts (the climb-out transient).
+    pub settle_s: f64,
+    /// Length of the healthy stretch used for calibration.
+    pub calibrate_s: f64,
+    /// End the healthy stretch at this vehicle time instead (s since boot).
+    pub calibrate_until: Option<f64>,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self {
+            profile: None,
+            diagnosis: DiagnosisParams::default(),
+            airborne_alt_m: 1.0,
+            armed_airborne_s: 5.0,
+            settle_s: 3.0,
+            calibrate_s: 20.0,
+            calibrate_until: None,
+        }
+    }
+}
+
+/// Where a pipeline's results go.
+pub trait PipelineSink {
+    fn decision(&mut self, d: &Decision, profile: &Profile);
+    /// Every filter step: both filters' estimates per actuator.
+    fn estimates(&mut self, _t: f64, _sysid: u8, _est: &[&[AhcEstimate]; 2], _profile: &Profile) {
+    }
+    /// Progress and warnings, one line each.
+    fn message(&mut self, sysid: u8, text: &str);
+}
+
+struct StoredSample {
+    t: f64,
+    rates: [f64; 3],
+    u: [f64; MAX_ACTUATORS],
+    az: Option<f64>,
+}
+
+struct Running {
+    profile: Profile,
+    filters: Box<dyn VehicleFilters>,
+    diag: Diagnoser,
+    dt: f64,
+    l: usize,
+    m: usize,
+    prev_u: Option<[f64; MAX_ACTUATORS]>,
+    last_t: f64,
+    est: [[AhcEstimate; MAX_ACTUATORS]; 2],
+    decisions: Vec<Decision>,
+}
+
+enum Stage {
+    Grounded,
+    Calibrating {
+        profile: Profile,
+        samples: Vec<StoredSample>,
+    },
+    Running(Box<Running>),
+    /// The profile could not be chosen or the filters not built; said once.
+    Failed,
+}
+
+/// Counters of the pipeline itself.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct PipelineCounters {
+    pub steps: u64,
+    /// Steps whose filter update failed (the filter was reset).
+    pub filter_errors: u64,
+    /// Gaps of more than five sample periods between samples while estimating.
+    pub gaps: u64,
+    /// Samples dropped for lack of a_z when the model measures it.
+    pub missing_az: u64,
+    pub decisions: u64,
+}
+
+pub struct VehiclePipeline {
+    pub sysid: u8,
+    cfg: PipelineConfig,
+    stage: Stage,
+    armed_since: Option<f64>,
+    airborne_since: Option<f64>,
+    pub detection: Option<Detection>,
+    pub fit: Option<ScaledFit>,
+    pub counters: PipelineCounters,
+    /// Last estimates (vehicle time, per filter and actuator), for summaries and dashboards.
+    pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
+    /// Actuators with a fault in force, by index.
+    pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
+}
+
+fn median_interval(ts: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = ts.collect();
+    let mut d: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    if d.is_empty() {
+        return 0.02;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
+impl VehiclePipeline {
+    pub fn new(sysid: u8, cfg: PipelineConfig) -> Self {
+        Self {
+            sysid,
+            cfg,
+            stage: Stage::Grounded,
+            armed_since: None,
+            airborne_since: None,
+            detection: None,
+            fit: None,
+            counters: PipelineCounters::default(),
+            last: None,
+            active: [None; MAX_ACTUATORS],
+        }
+    }
+
+    /// The profile in use, once chosen.
+    pub fn profile(&self) -> Option<&Profile> {
+        match &self.stage {
+            Stage::Calibrating { profile, .. } => Some(profile),
+            Stage::Running(r) => Some(&r.profile),
+            _ => self.detection.as_ref().map(|d| &d.profile),
+        }
+    }
+
+    pub fn stage_name(&self) -> &'static str {
+        match self.stage {
+            Stage::Grounded => "waiting for flight",
+            Stage::Calibrating { .. } => "calibrating",
+            Stage::Running(_) => "estimating",
+            Stage::Failed => "failed",
+        }
+    }
+
+    /// The vehicle rebooted: start over.
+    pub fn reset(&mut self, t: f64, sink: &mut dyn PipelineSink) {
+        if let Stage::Running(r) = &self.stage {
+            let d = Decision::monitor(t, self.sysid, Event::FilterReset, "vehicle rebooted");
+            sink.decision(&d, &r.profile);
+            self.counters.decisions += 1;
+        }
+        self.stage = Stage::Grounded;
+        self.armed_since = None;
+        self.airborne_since = None;
+        self.active = [None; MAX_ACTUATORS];
+    }
+
+    fn airborne(&mut self, s: &TelemetrySample) -> bool {
+        if !s.armed {
+            self.armed_since = None;
+            return false;
+        }
+        let since = *self.armed_since.get_or_insert(s.t);
+        match s.rel_alt {
+            Some(h) => h > self.cfg.airborne_alt_m,
+            None => s.t - since >= self.cfg.armed_airborne_s,
+        }
+    }
+
+    fn normalise(profile: &Profile, s: &TelemetrySample) -> Option<[f64; MAX_ACTUATORS]> {
+        let mut u = [0.0; MAX_ACTUATORS];
+        for (j, a) in profile.actuators.iter().enumerate() {
+            let pwm = *s.pwm.get(usize::from(a.channel).checked_sub(1)?)?;
+            if pwm == 0 {
+                return None;
+            }
+            u[j] = profile.normalise(j, f64::from(pwm));
+        }
+        Some(u)
+    }
+
+    pub fn on_sample(&mut self, s: &TelemetrySample, info: &VehicleInfo, sink: &mut dyn PipelineSink) {
+        let airborne = self.airborne(s);
+        if !airborne {
+            self.airborne_since = None;
+            match &mut self.stage {
+                Stage::Calibrating { .. } => {
+                    sink.message(self.sysid, "landed during calibration; starting over at the next take-off");
+                    self.stage = Stage::Grounded;
+                }
+                Stage::Running(r) => r.prev_u = None,
+                _ => {}
+            }
+            return;
+        }
+        let since = *self.airborne_since.get_or_insert(s.t);
+        match &mut self.stage {
+            Stage::Failed => {}
+            Stage::Grounded => {
+                if s.t - since < self.cfg.settle_s {
+                    return;
+                }
+                let detection = match &self.cfg.profile {
+                    Some(p) => Ok(Detection {
+                        profile: p.clone(),
+                        warnings: vec![],
+                        source: format!("{} (--profile)", p.name),
+                    }),
+                    None => detect(info),
+                };
+                match detection {
+                    Ok(d) => {
+                        for w in &d.warnings {
+                            sink.message(self.sysid, &format!("warning: {w}"));
+                        }
+                        sink.message(
+                            self.sysid,
+                            &format!("airborne at t={since:.2} s; profile {}; calibrating", d.source),
+                        );
+                        self.stage = Stage::Calibrating {
+                            profile: d.profile.clone(),
+                            samples: Vec::with_capacity(2048),
+                        };
+                        self.detection = Some(d);
+                    }
+                    Err(e) => {
+                        sink.message(self.sysid, &format!("error: {e}"));
+                        self.stage = Stage::Failed;
+                    }
+                }
+            }
+            Stage::Calibrating { profile, samples } => {
+                let Some(u) = Self::normalise(profile, s) else {
+                    return;
+                };
+                samples.push(StoredSample {
+                    t: s.t,
+                    rates: s.rates,
+                    u,
+                    az: s.az,
+                });
+                let start = samples[0].t;
+                let done = match self.cfg.calibrate_until {
+                    Some(until) => s.t >= until,
+                    None => s.t - start >= self.cfg.calibrate_s,
+                };
+                if done {
+                    let profile = profile.clone();
+                    let samples = std::mem::take(samples);
+                    self.start_running(profile, &samples, sink);
+                }
+            }
+            Stage::Running(r) => {
+                let Some(u) = Self::normalise(&r.profile, s) else {
+                    return;
+                };
+                let Some(prev_u) = r.prev_u.replace(u) else {
+                    r.last_t = s.t;
+                    return;
+                };
+                if s.t - r.last_t > 5.0 * r.dt {
+                    self.counters.gaps += 1;
+                }
+                r.last_t = s.t;
+                // The outputs sent at the previous instant act until this one.
+                let mut y = [0.0; 4];
+                y[..3].copy_from_slice(&s.rates);
+                if r.m == 4 {
+                    match s.az {
+                        Some(a) => y[3] = a,
+                        None => {
+                            self.counters.missing_az += 1;
+                            return;
+                        }
+                    }
+                }
+                let res = r.filters.step(&prev_u[..r.l], &y[..r.m]);
+                self.counters.steps += 1;
+                for (f, out) in res.iter().enumerate() {
+                    if out.is_err() {
+                        self.counters.filter_errors += 1;
+                        r.filters.reset(f);
+                        let d = Decision::monitor(
+                            s.t,
+                            self.sysid,
+                            Event::FilterReset,
+                            format!("{} update failed; reset", crate::estimate::vehicle::FILTER_NAMES[f]),
+                        );
+                        sink.decision(&d, &r.profile);
+                        self.counters.decisions += 1;
+                    }
+                    for j in 0..r.l {
+                        r.est[f][j] = r.filters.ahc(f, j);
+                    }
+                }
+                let views = [&r.est[0][..r.l], &r.est[1][..r.l]];
+                r.decisions.clear();
+                r.diag.update(s.t, &prev_u[..r.l], &views, &mut r.decisions);
+                sink.estimates(s.t, self.sysid, &views, &r.profile);
+                for d in &r.decisions {
+                    sink.decision(d, &r.profile);
+                    self.counters.decisions += 1;
+                }
+                for j in 0..r.l {
+                    self.active[j] = r.diag.active(j);
+                }
+                self.last = Some((s.t, r.est));
+            }
+        }
+    }
+
+    fn start_running(&mut self, profile: Profile, samples: &[StoredSample], sink: &mut dyn PipelineSink) {
+        let dt = median_interval(samples.iter().map(|s| s.t));
+        let l = profile.actuators.len();
+        let mut profile = profile;
+        // a_z is measured only if the vehicle sends an IMU with (nearly) every sample.
+        let with_az = samples.iter().filter(|s| s.az.is_some()).count();
+        if profile.model.measure_az && with_az * 10 < samples.len() * 9 {
+            sink.message(
+                self.sysid,
+                "no IMU acceleration with the rates (HIGHRES_IMU / SCALED_IMU / RAW_IMU); estimating from rates only",
+            );
+            profile.model.measure_az = false;
+        }
+        // The outputs of sample k act until sample k+1: pair each rate with the previous outputs.
+        let shifted: Vec<CalibrationSample> = samples
+            .windows(2)
+            .map(|w| CalibrationSample {
+                rates: w[1].rates,
+                u: &w[0].u[..l],
+                az: if profile.model.measure_az { w[1].az } else { None },
+            })
+            .filter(|c| !profile.model.measure_az || c.az.is_some())
+            .collect();
+        let base = profile.rate_params();
+        let fit = match calibrate_scaled(&shifted, dt, &base) {
+            Ok(f) => f,
+            Err(e) => {
+                sink.message(self.sysid, &format!("error: calibration failed: {e}"));
+                self.stage = Stage::Failed;
+                return;
+            }
+        };
+        let mut calibrated = profile.with_rate_params(&fit.params);
+        calibrated.rate_hz = 1.0 / dt;
+        // Process noise from what the model could not explain on the healthy stretch.
+        let rate_sd = fit.quality.residual_std[..3].iter().map(|v| v * v).sum::<f64>() / 3.0;
+        calibrated.noise.rate_process = rate_sd.sqrt().max(1e-4);
+        if calibrated.model.measure_az
+            && let Some(sd) = fit.quality.residual_std.get(3)
+        {
+            calibrated.noise.az = sd.max(1e-3);
+        }
+        let axes = ["roll", "pitch", "yaw", "a_z"];
+        let summary: Vec<String> = fit
+            .scaled
+            .iter()
+            .enumerate()
+            .map(|(i, sc)| {
+                format!(
+                    "{} {} R²={:.2}",
+                    axes[i],
+                    if *sc {
+                        format!("x{:.2}", fit.scale[i])
+                    } else {
+                        "offset only".into()
+                    },
+                    fit.quality.r_squared[i]
+                )
+            })
+            .collect();
+        sink.message(
+            self.sysid,
+            &format!(
+                "calibrated on {:.1} s ({} samples, dt {:.1} ms): {}",
+                samples.last().map_or(0.0, |s| s.t) - samples[0].t,
+                samples.len(),
+                dt * 1e3,
+                summary.join(", ")
+            ),
+        );
+        let filters = match build(&calibrated, dt) {
+            Ok(f) => f,
+            Err(e) => {
+                sink.message(self.sysid, &format!("error: {e}"));
+                self.stage = Stage::Failed;
+                return;
+            }
+        };
+        let m = filters.measurements();
+        let diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, &calibrated, dt);
+        self.fit = Some(fit);
+        let last = samples.last().map(|s| (s.t, s.u));
+        self.stage = Stage::Running(Box::new(Running {
+            profile: calibrated,
+            filters,
+            diag,
+            dt,
+            l,
+            m,
+            prev_u: last.map(|l| l.1),
+            last_t: last.map_or(0.0, |l| l.0),
+            est: [[AhcEstimate::default(); MAX_ACTUATORS]; 2],
+            decisions: Vec::with_capacity(8),
+        }));
+    }
+}

@@ -1,0 +1,425 @@
+//! Frames → telemetry samples, per vehicle (system id), on the vehicle's own clock.
+//!
+//! A sample needs body rates (ATTITUDE) and actuator outputs (SERVO_OUTPUT_RAW or
+//! ACTUATOR_OUTPUT_STATUS) for the same instant; a vertical specific force from HIGHRES_IMU,
+//! SCALED_IMU* or RAW_IMU is added when one is that recent. Outputs older than the skew
+//! tolerance are never reused silently: the rates wait for fresh outputs, and an instant that
+//! never gets them is counted as `unmatched`.
+
+use crate::link::dialects::ahcmon::{MavAutopilot, MavMessage, MavModeFlag, MavType};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Standard gravity (ArduPilot's GRAVITY_MSS): RAW_IMU / SCALED_IMU accelerations are in mG.
+const G0: f64 = 9.80665;
+/// Largest backwards step of the vehicle clock treated as reordering; more is a reboot.
+const REBOOT_BACKSTEP_S: f64 = 1.0;
+
+/// One instant of one vehicle: what an estimator step needs, before normalisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TelemetrySample {
+    /// Vehicle time (s since boot).
+    pub t: f64,
+    /// Body rates p, q, r (rad/s).
+    pub rates: [f64; 3],
+    /// Roll, pitch, yaw (rad).
+    pub attitude: [f64; 3],
+    /// Vertical specific force (m/s², body z, down positive; about -9.8 in hover).
+    pub az: Option<f64>,
+    /// Output PWM (µs) of channels 1..16; 0 = not sent.
+    pub pwm: [u16; 16],
+    pub armed: bool,
+    /// Height above home (m), when the vehicle sends GLOBAL_POSITION_INT.
+    pub rel_alt: Option<f64>,
+}
+
+/// What the telemetry layer dropped or repaired, per vehicle.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct TelemetryCounters {
+    pub samples: u64,
+    /// Rate instants for which no outputs of the same instant arrived.
+    pub unmatched: u64,
+    /// Messages older than the last sample (reordered) or at the same instant (duplicates).
+    pub out_of_order: u64,
+    pub duplicates: u64,
+    /// Vehicle clock jumped back by more than a second.
+    pub reboots: u64,
+    /// Messages with NaN / inf in the fields we use.
+    pub non_finite: u64,
+}
+
+/// What the vehicle said about itself: heartbeat and parameters.
+#[derive(Debug, Clone, Default)]
+pub struct VehicleInfo {
+    pub sysid: u8,
+    /// The autopilot's component id (from its heartbeat); other components are ignored.
+    pub compid: Option<u8>,
+    pub mav_type: Option<MavType>,
+    pub autopilot: Option<MavAutopilot>,
+    pub armed: bool,
+    pub params: BTreeMap<String, f32>,
+    pub statustext: Vec<String>,
+}
+
+impl VehicleInfo {
+    pub fn param(&self, name: &str) -> Option<f64> {
+        self.params.get(name).map(|v| f64::from(*v))
+    }
+}
+
+/// Maximum time between the rates and the outputs of one sample.
+#[derive(Debug, Clone, Copy)]
+pub struct AssemblerConfig {
+    pub max_skew_s: f64,
+}
+
+impl Default for AssemblerConfig {
+    fn default() -> Self {
+        // ArduPilot stamps ATTITUDE and SERVO_OUTPUT_RAW from the same loop (skew < 1 ms in
+        // the SITL logs); 15 ms is under one period at 50 Hz, so a pair is never a
+        // neighbour's outputs.
+        Self { max_skew_s: 0.015 }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Stamped<T> {
+    t: f64,
+    v: T,
+}
+
+/// One vehicle's assembler.
+#[derive(Debug)]
+pub struct VehicleAssembler {
+    cfg: AssemblerConfig,
+    pub info: VehicleInfo,
+    pub counters: TelemetryCounters,
+    rates: Option<Stamped<([f64; 3], [f64; 3])>>,
+    rates_used: bool,
+    outputs: Option<Stamped<[u16; 16]>>,
+    az: Option<Stamped<f64>>,
+    rel_alt: Option<f64>,
+    last_sample_t: Option<f64>,
+    /// Latest vehicle time seen (s), for reboot detection and u32 µs unwrapping.
+    clock: Option<f64>,
+    /// Set when a reboot was seen; the caller resets its filters.
+    pub rebooted: bool,
+    /// The vehicle sends IMU accelerations: a complete instant waits for its a_z.
+    has_imu: bool,
+    pending: Option<TelemetrySample>,
+}
+
+/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time.
+fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
+    let raw = f64::from(stamp) * 1e-6;
+    match reference_s {
+        None => raw,
+        Some(r) => {
+            let span = 4_294_967_296e-6;
+            raw + ((r - raw) / span).round() * span
+        }
+    }
+}
+
+impl VehicleAssembler {
+    pub fn new(sysid: u8, cfg: AssemblerConfig) -> Self {
+        Self {
+            cfg,
+            info: VehicleInfo {
+                sysid,
+                ..Default::default()
+            },
+            counters: TelemetryCounters::default(),
+            rates: None,
+            rates_used: false,
+            outputs: None,
+            az: None,
+            rel_alt: None,
+            last_sample_t: None,
+            clock: None,
+            rebooted: false,
+            has_imu: false,
+            pending: None,
+        }
+    }
+
+    fn from_autopilot(&self, compid: u8) -> bool {
+        match self.info.compid {
+            Some(c) => c == compid,
+            // Before the autopilot's heartbeat: MAV_COMP_ID_AUTOPILOT1.
+            None => compid == 1,
+        }
+    }
+
+    /// Advance the clock; false if `t` is stale (reordered) — the message is then dropped.
+    fn tick(&mut self, t: f64) -> bool {
+        match self.clock {
+            Some(c) if t < c - REBOOT_BACKSTEP_S => {
+                self.counters.reboots += 1;
+                self.rebooted = true;
+                self.rates = None;
+                self.outputs = None;
+                self.az = None;
+                self.last_sample_t = None;
+                self.clock = Some(t);
+                true
+            }
+            Some(c) => {
+                self.clock = Some(c.max(t));
+                true
+            }
+            None => {
+                self.clock = Some(t);
+                true
+            }
+        }
+    }
+
+    /// Feed one message; complete instants are appended to `out` (in time order).
+    pub fn on_message(&mut self, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
+        // A new rate instant releases a sample still waiting for its a_z, without it.
+        if matches!(msg, MavMessage::ATTITUDE(_)) && self.from_autopilot(compid) {
+            out.extend(self.pending.take());
+        }
+        let emitted = self.message(compid, msg);
+        if let (Some(p), Some(a)) = (self.pending.as_mut(), self.az)
+            && (a.t - p.t).abs() <= self.cfg.max_skew_s
+        {
+            p.az = Some(a.v);
+            out.extend(self.pending.take());
+        }
+        if let Some(s) = emitted {
+            if self.has_imu && s.az.is_none() {
+                // Usually sent just after the outputs: wait for this instant's a_z.
+                out.extend(self.pending.replace(s));
+            } else {
+                out.push(s);
+            }
+        }
+    }
+
+    /// A sample still waiting for its a_z, released without it (end of input).
+    pub fn flush(&mut self, out: &mut Vec<TelemetrySample>) {
+        out.extend(self.pending.take());
+    }
+
+    fn message(&mut self, compid: u8, msg: &MavMessage) -> Option<TelemetrySample> {
+        match msg {
+            MavMessage::HEARTBEAT(hb) => {
+                let is_autopilot = hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+                    && !matches!(
+                        hb.mavtype,
+                        MavType::MAV_TYPE_GCS
+                            | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+                            | MavType::MAV_TYPE_GIMBAL
+                            | MavType::MAV_TYPE_ADSB
+                            | MavType::MAV_TYPE_CAMERA
+                    );
+                if is_autopilot && self.info.compid.is_none_or(|c| c == compid) {
+                    self.info.compid = Some(compid);
+                    self.info.mav_type = Some(hb.mavtype);
+                    self.info.autopilot = Some(hb.autopilot);
+                    self.info.armed = hb
+                        .base_mode
+                        .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                }
+                None
+            }
+            _ if !self.from_autopilot(compid) => None,
+            MavMessage::PARAM_VALUE(p) => {
+                let name = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
+                if !name.is_empty() && p.param_value.is_finite() {
+                    self.info.params.insert(name.to_string(), p.param_value);
+                }
+                None
+            }
+            MavMessage::STATUSTEXT(s) => {
+                if self.info.statustext.len() < 1000 {
+                    self.info
+                        .statustext
+                        .push(s.text.to_str().unwrap_or("").to_string());
+                }
+                None
+            }
+            MavMessage::GLOBAL_POSITION_INT(g) => {
+                self.rel_alt = Some(f64::from(g.relative_alt) * 1e-3);
+                None
+            }
+            MavMessage::ATTITUDE(a) => {
+                let v = [a.rollspeed, a.pitchspeed, a.yawspeed, a.roll, a.pitch, a.yaw];
+                if v.iter().any(|x| !x.is_finite()) {
+                    self.counters.non_finite += 1;
+                    return None;
+                }
+                let t = f64::from(a.time_boot_ms) * 1e-3;
+                if !self.tick(t) {
+                    return None;
+                }
+                if let Some(last) = self.last_sample_t {
+                    if t < last {
+                        self.counters.out_of_order += 1;
+                        return None;
+                    }
+                    if t == last {
+                        self.counters.duplicates += 1;
+                        return None;
+                    }
+                }
+                if let Some(prev) = self.rates
+                    && !self.rates_used
+                    && prev.t != t
+                {
+                    self.counters.unmatched += 1;
+                }
+                let rates = [v[0], v[1], v[2]].map(f64::from);
+                let att = [v[3], v[4], v[5]].map(f64::from);
+                self.rates = Some(Stamped { t, v: (rates, att) });
+                self.rates_used = false;
+                self.try_emit()
+            }
+            MavMessage::SERVO_OUTPUT_RAW(s) => {
+                // port 0 carries outputs 1..16; other ports are further banks we do not map.
+                if s.port != 0 {
+                    return None;
+                }
+                let t = unwrap_u32_us(s.time_usec, self.clock);
+                if !self.tick(t) {
+                    return None;
+                }
+                let pwm = [
+                    s.servo1_raw,
+                    s.servo2_raw,
+                    s.servo3_raw,
+                    s.servo4_raw,
+                    s.servo5_raw,
+                    s.servo6_raw,
+                    s.servo7_raw,
+                    s.servo8_raw,
+                    s.servo9_raw,
+                    s.servo10_raw,
+                    s.servo11_raw,
+                    s.servo12_raw,
+                    s.servo13_raw,
+                    s.servo14_raw,
+                    s.servo15_raw,
+                    s.servo16_raw,
+                ];
+                self.outputs = Some(Stamped { t, v: pwm });
+                self.try_emit()
+            }
+            MavMessage::ACTUATOR_OUTPUT_STATUS(s) => {
+                // PX4: outputs as PWM-like values in `actuator[]`, `active` bitmask.
+                let t = s.time_usec as f64 * 1e-6;
+                if !self.tick(t) {
+                    return None;
+                }
+                let mut pwm = [0u16; 16];
+                for (k, p) in pwm.iter_mut().enumerate() {
+                    let v = s.actuator[k];
+                    if s.active & (1 << k) != 0 && v.is_finite() && (0.0..65535.0).contains(&v) {
+                        *p = v as u16;
+                    }
+                }
+                self.outputs = Some(Stamped { t, v: pwm });
+                self.try_emit()
+            }
+            MavMessage::HIGHRES_IMU(m) => self.on_az(m.time_usec as f64 * 1e-6, f64::from(m.zacc)),
+            MavMessage::SCALED_IMU(m) => {
+                self.on_az(f64::from(m.time_boot_ms) * 1e-3, f64::from(m.zacc) * 1e-3 * G0)
+            }
+            MavMessage::SCALED_IMU2(m) => {
+                self.on_az(f64::from(m.time_boot_ms) * 1e-3, f64::from(m.zacc) * 1e-3 * G0)
+            }
+            MavMessage::RAW_IMU(m)
+                // RAW_IMU is in mG only on ArduPilot (elsewhere raw sensor units).
+                if self.info.autopilot.is_none_or(|a| a == MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA) =>
+            {
+                self.on_az(m.time_usec as f64 * 1e-6, f64::from(m.zacc) * 1e-3 * G0)
+            }
+            _ => None,
+        }
+    }
+
+    fn on_az(&mut self, t: f64, az: f64) -> Option<TelemetrySample> {
+        if !az.is_finite() {
+            self.counters.non_finite += 1;
+            return None;
+        }
+        // Prefer one IMU: a second, differently stamped source would interleave.
+        if let Some(prev) = self.az
+            && t < prev.t
+        {
+            return None;
+        }
+        self.az = Some(Stamped { t, v: az });
+        self.has_imu = true;
+        None
+    }
+
+    fn try_emit(&mut self) -> Option<TelemetrySample> {
+        let rates = self.rates?;
+        let outputs = self.outputs?;
+        if self.rates_used || (rates.t - outputs.t).abs() > self.cfg.max_skew_s {
+            return None;
+        }
+        self.rates_used = true;
+        self.last_sample_t = Some(rates.t);
+        self.counters.samples += 1;
+        let az = self
+            .az
+            .filter(|a| (a.t - rates.t).abs() <= self.cfg.max_skew_s)
+            .map(|a| a.v);
+        Some(TelemetrySample {
+            t: rates.t,
+            rates: rates.v.0,
+            attitude: rates.v.1,
+            az,
+            pwm: outputs.v,
+            armed: self.info.armed,
+            rel_alt: self.rel_alt,
+        })
+    }
+}
+
+/// Assemblers for every vehicle seen, keyed by system id.
+#[derive(Debug, Default)]
+pub struct Assembler {
+    pub cfg: AssemblerConfig,
+    pub vehicles: BTreeMap<u8, VehicleAssembler>,
+}
+
+impl Assembler {
+    pub fn new(cfg: AssemblerConfig) -> Self {
+        Self {
+            cfg,
+            vehicles: BTreeMap::new(),
+        }
+    }
+
+    /// Feed one frame; complete samples of its vehicle are appended to `out`. GCS traffic
+    /// (sysid 255 and MAV_TYPE_GCS heartbeats) never makes a vehicle.
+    pub fn on_frame(&mut self, sysid: u8, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
+        if sysid == 255 || sysid == 0 {
+            return;
+        }
+        if !self.vehicles.contains_key(&sysid) {
+            // Only an autopilot's heartbeat or a rate message makes a new vehicle.
+            let vehicle_like = match msg {
+                MavMessage::HEARTBEAT(hb) => {
+                    hb.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
+                        && hb.mavtype != MavType::MAV_TYPE_GCS
+                }
+                MavMessage::ATTITUDE(_) | MavMessage::SERVO_OUTPUT_RAW(_) => compid == 1,
+                _ => false,
+            };
+            if !vehicle_like {
+                return;
+            }
+            self.vehicles
+                .insert(sysid, VehicleAssembler::new(sysid, self.cfg));
+        }
+        if let Some(v) = self.vehicles.get_mut(&sysid) {
+            v.on_message(compid, msg, out);
+        }
+    }
+}

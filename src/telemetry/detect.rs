@@ -1,0 +1,168 @@
+//! Which built-in profile a vehicle gets, from what it says about itself: HEARTBEAT's MAV_TYPE
+//! and, when the stream carries them, ArduPilot's FRAME_CLASS / FRAME_TYPE / H_SW_TYPE and the
+//! `SERVOn_*` / `MOT_PWM_*` parameters. Anything assumed is said once, with the override.
+
+use super::assembler::VehicleInfo;
+use super::profile::{Profile, ProfileError, Role};
+use crate::link::dialects::ahcmon::MavType;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum DetectError {
+    #[error("sysid {sysid}: no heartbeat from an autopilot yet, so the vehicle type is unknown; pass --profile NAME|FILE")]
+    NoHeartbeat { sysid: u8 },
+    #[error("sysid {sysid}: no built-in profile for MAV_TYPE {mav_type:?}; pass --profile NAME|FILE")]
+    Unsupported { sysid: u8, mav_type: MavType },
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+}
+
+/// The profile for a vehicle, and how it was chosen.
+#[derive(Debug, Clone)]
+pub struct Detection {
+    pub profile: Profile,
+    /// One line per assumption (what, and how to override it).
+    pub warnings: Vec<String>,
+    /// How the profile was chosen, for the summary.
+    pub source: String,
+}
+
+/// ArduPilot's SERVOn_FUNCTION of the actuator `index`-th of its role in a profile.
+fn ardupilot_function(role: Role, index: usize) -> Option<u32> {
+    match role {
+        // k_motor1.. = 33..40 (multirotor motors; TradHeli swash servos 1-3 and the tail).
+        Role::Motor | Role::Swash => Some(33 + index as u32),
+        Role::Tail => Some(36),
+        Role::Aileron => Some(4),
+        Role::Elevator => Some(19),
+        Role::Rudder => Some(21),
+        Role::Throttle => Some(70),
+        Role::Custom => None,
+    }
+}
+
+/// Pick a built-in profile from the heartbeat and the parameters seen so far.
+pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
+    let sysid = info.sysid;
+    let mav_type = info.mav_type.ok_or(DetectError::NoHeartbeat { sysid })?;
+    let mut warnings = Vec::new();
+    let frame_class = info.param("FRAME_CLASS");
+    let frame_type = info.param("FRAME_TYPE");
+    let name = match mav_type {
+        MavType::MAV_TYPE_HELICOPTER => {
+            match info.param("H_SW_TYPE") {
+                Some(v) if v as i64 == 3 => {}
+                Some(v) => warnings.push(format!(
+                    "sysid {sysid}: H_SW_TYPE {v} is not H3-120, the only swashplate with a built-in profile; estimates assume H3-120 (write a profile for your head and pass --profile FILE)"
+                )),
+                None => warnings.push(format!(
+                    "sysid {sysid}: H_SW_TYPE not in the stream; assuming ArduPilot's default H3-120 head (servo 1 left, 2 right, 3 rear, 4 tail); --profile overrides"
+                )),
+            }
+            "heli-h3-120"
+        }
+        MavType::MAV_TYPE_QUADROTOR => match frame_type.map(|v| v as i64) {
+            Some(0) => "quad-plus",
+            Some(1) => "quad-x",
+            Some(other) => {
+                warnings.push(format!(
+                    "sysid {sysid}: FRAME_TYPE {other} has no built-in profile; assuming quad X; --profile overrides"
+                ));
+                "quad-x"
+            }
+            None => {
+                warnings.push(format!(
+                    "sysid {sysid}: FRAME_TYPE not in the stream, so + or X is unknown; assuming quad X (ArduPilot motor order); pass --profile quad-plus for a + frame"
+                ));
+                "quad-x"
+            }
+        },
+        MavType::MAV_TYPE_HEXAROTOR => {
+            if frame_type.is_some_and(|v| v as i64 != 1) {
+                warnings.push(format!(
+                    "sysid {sysid}: FRAME_TYPE {} is not X; assuming hexa X; --profile overrides",
+                    frame_type.unwrap_or(0.0)
+                ));
+            }
+            "hexa-x"
+        }
+        MavType::MAV_TYPE_FIXED_WING => "plane",
+        other => return Err(DetectError::Unsupported { sysid, mav_type: other }),
+    };
+    if let Some(fc) = frame_class {
+        let expected = match name {
+            "heli-h3-120" => 6,
+            "quad-plus" | "quad-x" => 1,
+            "hexa-x" => 2,
+            _ => fc as i64,
+        };
+        if fc as i64 != expected {
+            warnings.push(format!(
+                "sysid {sysid}: FRAME_CLASS {fc} does not match MAV_TYPE {mav_type:?}; using {name}; --profile overrides"
+            ));
+        }
+    }
+    let mut profile = Profile::resolve(name)?;
+    let mapped = apply_params(&mut profile, info);
+    let source = format!(
+        "{name} (from HEARTBEAT {mav_type:?}{}{})",
+        if frame_type.is_some() { ", FRAME_TYPE" } else { "" },
+        if mapped > 0 {
+            format!(", {mapped} outputs from SERVOn_* parameters")
+        } else {
+            String::new()
+        }
+    );
+    Ok(Detection {
+        profile,
+        warnings,
+        source,
+    })
+}
+
+/// Map the profile's actuators to outputs and PWM ranges from ArduPilot's `SERVOn_FUNCTION`,
+/// `SERVOn_MIN/TRIM/MAX/REVERSED` and (motors) `MOT_PWM_MIN/MAX`. Returns how many actuators
+/// were mapped from parameters.
+pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
+    let mut mapped = 0;
+    let mut seen = std::collections::BTreeMap::<Role, usize>::new();
+    for a in profile.actuators.iter_mut() {
+        let index = seen.entry(a.role).or_insert(0);
+        let function = ardupilot_function(a.role, *index);
+        *index += 1;
+        let Some(function) = function else { continue };
+        let channel = (1..=16u8).find(|n| {
+            info.param(&format!("SERVO{n}_FUNCTION"))
+                .is_some_and(|f| f as u32 == function)
+        });
+        let Some(n) = channel else { continue };
+        a.channel = n;
+        mapped += 1;
+        let get = |what: &str| info.param(&format!("SERVO{n}_{what}"));
+        if a.role.is_range() {
+            match (info.param("MOT_PWM_MIN"), info.param("MOT_PWM_MAX")) {
+                (Some(lo), Some(hi)) if lo > 0.0 && hi > lo => {
+                    a.pwm_min = lo;
+                    a.pwm_max = hi;
+                }
+                _ => {
+                    if let (Some(lo), Some(hi)) = (get("MIN"), get("MAX"))
+                        && hi > lo
+                    {
+                        a.pwm_min = lo;
+                        a.pwm_max = hi;
+                    }
+                }
+            }
+        } else if let (Some(lo), Some(trim), Some(hi)) = (get("MIN"), get("TRIM"), get("MAX"))
+            && lo < trim
+            && trim < hi
+        {
+            a.pwm_min = lo;
+            a.pwm_trim = trim;
+            a.pwm_max = hi;
+            a.reversed = get("REVERSED").is_some_and(|r| r != 0.0);
+        }
+    }
+    mapped
+}
