@@ -358,13 +358,15 @@ impl VehiclePipeline {
         };
         let mut calibrated = profile.with_rate_params(&fit.params);
         calibrated.rate_hz = 1.0 / dt;
-        // Process noise from what the model could not explain on the healthy stretch.
+        // Process noise from what the model could not explain on the healthy stretch, but
+        // never below the profile's: a calm stretch (a still hover) would otherwise make the
+        // filters trust the model more than any manoeuvre or fault transient deserves.
         let rate_sd = fit.quality.residual_std[..3].iter().map(|v| v * v).sum::<f64>() / 3.0;
-        calibrated.noise.rate_process = rate_sd.sqrt().max(1e-4);
+        calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
         if calibrated.model.measure_az
             && let Some(sd) = fit.quality.residual_std.get(3)
         {
-            calibrated.noise.az = sd.max(1e-3);
+            calibrated.noise.az = sd.max(profile.noise.az);
         }
         let axes = ["roll", "pitch", "yaw", "a_z"];
         let summary: Vec<String> = fit

@@ -15,6 +15,12 @@ pub struct UkfParams {
     pub kappa: f64,
     /// Floor on the AHC variances, so an unexcited filter does not go deaf to the next fault.
     pub ahc_variance_floor: f64,
+    /// Robust update: an innovation whose NIS exceeds this moves the state only as far as one
+    /// at this NIS would (Huber-style). A transient the model cannot explain (a fault's first
+    /// steps, a gust) then moves the state a few sigma per step, in the direction the data
+    /// keep pointing, instead of tens of sigma along whatever direction the prior makes
+    /// cheapest. Infinite (off) for the paper's filters.
+    pub innovation_clip_nis: f64,
 }
 
 impl Default for UkfParams {
@@ -24,6 +30,7 @@ impl Default for UkfParams {
             ut_beta: 2.0,
             kappa: 0.0,
             ahc_variance_floor: 1e-10,
+            innovation_clip_nis: f64::INFINITY,
         }
     }
 }
@@ -165,7 +172,12 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         let gain = s_chol.solve(&pxy.transpose()).transpose();
         let e = y - y_pred;
         self.nis = e.dot(&s_chol.solve(&e));
-        self.x += gain * e;
+        let scale = if self.nis > self.params.innovation_clip_nis {
+            (self.params.innovation_clip_nis / self.nis).sqrt()
+        } else {
+            1.0
+        };
+        self.x += gain * e * scale;
         let i_kh = SMatrix::<f64, N, N>::identity() - gain * self.h;
         let mut p = i_kh * self.p * i_kh.transpose() + gain * self.r * gain.transpose();
         symmetrize(&mut p);

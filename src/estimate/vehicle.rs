@@ -162,9 +162,14 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
     }
 
     fn new_ukf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitUkf<RateModel<N, M>, N, M, S> {
+        // chi-square 99.9 % quantile with M degrees of freedom (3 or 4 measurements).
+        let clip = if M == 4 { 18.47 } else { 16.27 };
         let mut f = MitUkf::new(
             s.model,
-            UkfParams::default(),
+            UkfParams {
+                innovation_clip_nis: clip,
+                ..UkfParams::default()
+            },
             adapt,
             s.x0,
             s.kalman_p0,
