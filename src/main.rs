@@ -2,7 +2,7 @@
 
 use ahcmon::eval::vehicle::{run_vehicle_scenario, sim_config};
 use ahcmon::eval::{EvalError, Run, aggregate, run_scenario};
-use ahcmon::link::TlogReader;
+use ahcmon::link::{ConnError, ConnSpec, Link, TlogReader, TlogWriter};
 use ahcmon::monitor::Monitor;
 use ahcmon::output::jsonl::{MonitorFiles, RunFiles};
 use ahcmon::output::{summary, svg, table};
@@ -70,6 +70,41 @@ enum Command {
         /// Seed (default: the scenario's).
         #[arg(long)]
         seed: Option<u64>,
+        /// Speak MAVLink like an autopilot on this connection (e.g. udpout:127.0.0.1:14550):
+        /// HEARTBEAT, ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU, SYS_STATUS, GLOBAL_POSITION_INT and
+        /// the frame parameters. Paced at --speed (default real time).
+        #[arg(long, value_name = "CONN")]
+        out: Option<String>,
+        /// Write the same MAVLink stream as a .tlog.
+        #[arg(long, value_name = "FILE")]
+        tlog: Option<PathBuf>,
+        /// Multiple of real time for --out (default 1); without --out the tlog is written as
+        /// fast as possible.
+        #[arg(long, value_name = "X")]
+        speed: Option<f64>,
+        /// MAVLink system id of the simulated vehicle.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=254))]
+        sysid: u8,
+    },
+    /// Watch live vehicles on a MAVLink connection (e.g. udpin:0.0.0.0:14550 beside a ground
+    /// station): both filters and the diagnosis per vehicle, decisions as they happen, a summary
+    /// on exit (ctrl-c).
+    Monitor {
+        /// udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT,
+        /// tcpout:HOST:PORT or serial:DEVICE:BAUD.
+        conn: String,
+        #[command(flatten)]
+        run: RunArgs,
+        /// No dashboard (the dashboard is not built yet: the monitor is headless for now).
+        #[arg(long)]
+        headless: bool,
+        /// A vehicle silent this long (s) gets a link_lost decision.
+        #[arg(long, default_value_t = 2.0, value_name = "S")]
+        link_timeout: f64,
+        /// Exit after this long (s) without any frame, once frames have arrived (e.g. at the
+        /// end of a simulated flight).
+        #[arg(long, value_name = "S")]
+        exit_idle: Option<f64>,
     },
     /// Replay a telemetry log (.tlog from any ground station) through both filters and the
     /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
@@ -146,6 +181,7 @@ fn is_input_error(e: &anyhow::Error) -> bool {
             || c.is::<EvalError>()
             || c.is::<ProfileError>()
             || c.is::<InputFileError>()
+            || matches!(c.downcast_ref::<ConnError>(), Some(ConnError::Syntax(_)))
     })
 }
 
@@ -196,8 +232,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             decisions,
             estimates,
             seed,
+            out,
+            tlog,
+            speed,
+            sysid,
         } => {
             let named = scenario::resolve(&name)?;
+            if out.is_some() || tlog.is_some() {
+                if decisions.is_some() || estimates.is_some() {
+                    return Err(UsageError(
+                        "--decisions / --estimates come from the in-process filters; with --out / --tlog run `ahcmon monitor` or `ahcmon replay` on the stream instead".into(),
+                    )
+                    .into());
+                }
+                let opts = SimOutput {
+                    out,
+                    tlog,
+                    truth,
+                    speed,
+                    sysid,
+                    seed: seed.unwrap_or(named.scenario.seed),
+                };
+                return sim_mavlink(&named, opts);
+            }
             let (cfg, _) = sim_config(&named, 0)?;
             let mut files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), 1)
                 .context("cannot create output file")?;
@@ -208,6 +265,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             run_with_files(&named, seed.unwrap_or(named.scenario.seed), files, true)
         }
+        Command::Monitor {
+            conn,
+            run,
+            headless: _,
+            link_timeout,
+            exit_idle,
+        } => monitor(&conn, &run, link_timeout, exit_idle),
         Command::Replay {
             file,
             run,
@@ -216,6 +280,163 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             headless: _,
         } => replay(&file, &run, speed),
     }
+}
+
+struct SimOutput {
+    out: Option<String>,
+    tlog: Option<PathBuf>,
+    truth: Option<PathBuf>,
+    speed: Option<f64>,
+    sysid: u8,
+    seed: u64,
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
+fn positive(name: &str, v: f64) -> anyhow::Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(UsageError(format!("{name} {v}: must be a positive number")).into())
+    }
+}
+
+/// The simulated vehicle as a MAVLink autopilot: to a live connection and/or a tlog.
+fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
+    use ahcmon::output::jsonl::{JsonlWriter, NoiseInForce, TruthRecord};
+    use ahcmon::sim::vehicle::VehicleSim;
+    use ahcmon::telemetry::encode::SimTelemetry;
+    if named.scenario.is_paper() {
+        return Err(UsageError(format!(
+            "{} is a paper scenario; MAVLink output needs a vehicle scenario",
+            named.name
+        ))
+        .into());
+    }
+    let speed = o.speed.map(|x| positive("--speed", x)).transpose()?;
+    let spec: Option<ConnSpec> = o.out.as_deref().map(str::parse).transpose()?;
+    let (cfg, _) = sim_config(named, o.seed)?;
+    let vehicle = cfg.profile.clone();
+    let (gyro, az_noise) = (cfg.gyro_noise, cfg.az_noise);
+    let mut sim = VehicleSim::new(cfg).map_err(|e| anyhow::anyhow!(e))?;
+    let mut enc = SimTelemetry::new(&vehicle);
+    let mut tlog = o
+        .tlog
+        .as_deref()
+        .map(|p| TlogWriter::create(p).with_context(|| format!("cannot create {}", p.display())))
+        .transpose()?;
+    let mut truth = o
+        .truth
+        .as_deref()
+        .map(|p| JsonlWriter::create(p).with_context(|| format!("cannot create {}", p.display())))
+        .transpose()?;
+    let steps = named.scenario.steps();
+    let pace = if spec.is_some() { Some(speed.unwrap_or(1.0)) } else { speed };
+    // tlog time: now when live, a fixed epoch otherwise (reproducible files).
+    let epoch_us = if spec.is_some() {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_micros() as u64)
+    } else {
+        1_767_225_600_000_000 // 2026-01-01T00:00:00Z
+    };
+    let rt = runtime()?;
+    let mut counts: std::collections::BTreeMap<&'static str, u64> = Default::default();
+    let (sent, unsent) = rt.block_on(async {
+        let mut link = match &spec {
+            Some(s) => Some(Link::open(s.clone()).await?),
+            None => None,
+        };
+        let started = tokio::time::Instant::now();
+        let mut msgs = Vec::with_capacity(64);
+        let mut frame = Vec::with_capacity(300);
+        let mut seq = 0u8;
+        let (mut sent, mut unsent) = (0u64, 0u64);
+        let mut prev = sim.step();
+        for _ in 1..steps {
+            let next = sim.step();
+            msgs.clear();
+            // Rates of this instant with the outputs commanded now (they act until the next).
+            enc.messages(prev.t, [prev.y[0], prev.y[1], prev.y[2]], prev.attitude, if vehicle.model.measure_az { prev.y[3] } else { -9.80665 }, &next.u[..vehicle.actuators.len()], &mut msgs);
+            if let Some(x) = pace {
+                let due = started + std::time::Duration::from_secs_f64(prev.t / x);
+                tokio::time::sleep_until(due).await;
+            }
+            let ts = epoch_us + (prev.t * 1e6) as u64;
+            for m in &msgs {
+                ahcmon::link::frame::encode_v2(o.sysid, 1, seq, m, &mut frame);
+                seq = seq.wrapping_add(1);
+                *counts.entry(mavlink_core::Message::message_name(m)).or_insert(0) += 1;
+                if let Some(w) = tlog.as_mut() {
+                    w.write_raw(ts, &frame)?;
+                }
+                if let Some(l) = link.as_mut() {
+                    if l.send(&frame).await? {
+                        sent += 1;
+                    } else {
+                        unsent += 1;
+                    }
+                }
+            }
+            if let Some(w) = truth.as_mut() {
+                let noise = NoiseInForce { gyro, az: az_noise };
+                let mut rec = TruthRecord::new(&prev, &vehicle, noise);
+                rec.t = prev.t + ahcmon::telemetry::encode::BOOT_OFFSET_S;
+                w.write(&rec)?;
+            }
+            prev = next;
+        }
+        anyhow::Ok((sent, unsent))
+    })?;
+    if let Some(w) = tlog.as_mut() {
+        w.flush()?;
+    }
+    let list: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    println!(
+        "{}: {} s of {} as sysid {} (seed {}): {}",
+        named.name,
+        named.scenario.duration_s,
+        vehicle.name,
+        o.sysid,
+        o.seed,
+        list.join(", ")
+    );
+    if let Some(s) = &spec {
+        println!("sent {sent} frames to {s}{}", if unsent > 0 { format!(", {unsent} not sent (no peer yet)") } else { String::new() });
+    }
+    Ok(())
+}
+
+fn monitor(conn: &str, args: &RunArgs, link_timeout: f64, exit_idle: Option<f64>) -> anyhow::Result<()> {
+    let spec: ConnSpec = conn.parse()?;
+    let opts = ahcmon::link::live::LiveOptions {
+        link_timeout: std::time::Duration::from_secs_f64(positive("--link-timeout", link_timeout)?),
+        exit_idle: exit_idle
+            .map(|s| positive("--exit-idle", s).map(std::time::Duration::from_secs_f64))
+            .transpose()?,
+        ..Default::default()
+    };
+    let mut monitor = Monitor::new(args.pipeline_config()?);
+    let mut files = args.files()?;
+    let rt = runtime()?;
+    let counters = rt.block_on(async {
+        let link = Link::open(spec.clone()).await?;
+        eprintln!("monitor: listening on {spec}{}", link.local_addr().map_or(String::new(), |a| format!(" (local {a})")));
+        ahcmon::link::live::run(link, &mut monitor, &mut files, opts).await
+    })?;
+    if let Some(e) = files.error.take() {
+        return Err(anyhow::Error::new(e).context("writing JSON lines"));
+    }
+    print!("{}", summary::render(&monitor, &counters.link, &files.seen));
+    if counters.backpressure_drops > 0 {
+        println!("{} frames dropped: the estimators fell behind", counters.backpressure_drops);
+    }
+    Ok(())
 }
 
 /// An input file that cannot be read (exit code 2).

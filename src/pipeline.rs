@@ -52,6 +52,8 @@ pub trait PipelineSink {
     }
     /// Progress and warnings, one line each.
     fn message(&mut self, sysid: u8, text: &str);
+    /// A decision about the link rather than an actuator (`link_lost` / `link_restored`).
+    fn link_event(&mut self, d: &Decision);
 }
 
 struct StoredSample {
@@ -109,6 +111,8 @@ pub struct VehiclePipeline {
     pub counters: PipelineCounters,
     /// Last estimates (vehicle time, per filter and actuator), for summaries and dashboards.
     pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
+    /// Vehicle time of the last sample seen (any stage).
+    pub last_sample_t: Option<f64>,
     /// Actuators with a fault in force, by index.
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
 }
@@ -135,6 +139,7 @@ impl VehiclePipeline {
             fit: None,
             counters: PipelineCounters::default(),
             last: None,
+            last_sample_t: None,
             active: [None; MAX_ACTUATORS],
         }
     }
@@ -195,6 +200,7 @@ impl VehiclePipeline {
     }
 
     pub fn on_sample(&mut self, s: &TelemetrySample, info: &VehicleInfo, sink: &mut dyn PipelineSink) {
+        self.last_sample_t = Some(s.t);
         let airborne = self.airborne(s);
         if !airborne {
             self.airborne_since = None;

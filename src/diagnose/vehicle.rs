@@ -68,6 +68,9 @@ pub enum FaultClass {
     Stuck,
     Bias,
     Drift,
+    /// The effective output is off, but the flight has not moved the command enough to tell
+    /// a gain from a bias (steady hover): detected and isolated, class open.
+    Unclassified,
 }
 
 impl FaultClass {
@@ -77,6 +80,7 @@ impl FaultClass {
             FaultClass::Stuck => "stuck",
             FaultClass::Bias => "bias",
             FaultClass::Drift => "drift",
+            FaultClass::Unclassified => "unclassified",
         }
     }
 }
@@ -400,9 +404,9 @@ impl Diagnoser {
             // Classification needs the command to have moved enough to separate gamma and delta.
             let excited = !low;
             let class = if excited {
-                Some(self.classify(j))
+                self.classify(j)
             } else {
-                None
+                FaultClass::Unclassified
             };
             let also: Vec<String> = (0..l)
                 .filter(|&k| k != j && (0..2).any(|f| self.actuators[k].channels[f].alarm))
@@ -410,28 +414,24 @@ impl Diagnoser {
                 .collect();
             let st = &self.actuators[j];
             match (st.active, class) {
-                (None, None) => {
-                    if !st.excitation_reported {
-                        let mut d = self.decision(t, j, Event::ExcitationLow, None, filters);
-                        d.detail = Some(format!(
-                            "output deviates by {:.3} but the command has not varied enough (std {:.4}) to tell gain from bias",
-                            st.channels[0].e,
-                            st.u.var.sqrt()
-                        ));
-                        out.push(d);
-                        self.actuators[j].excitation_reported = true;
-                    }
-                }
-                (None, Some(c)) => {
+                (None, c) => {
                     let mut d = self.decision(t, j, Event::Fault, Some(c), filters.clone());
                     d.also = also;
+                    if c == FaultClass::Unclassified {
+                        d.detail = Some(format!(
+                            "effective output off by {:+.3} (gamma*u+delta at the operating point); the command has not varied enough (std {:.4}) to tell gain from bias",
+                            self.actuators[j].channels[0].e,
+                            self.actuators[j].u.var.sqrt()
+                        ));
+                    }
                     out.push(d);
                     let st = &mut self.actuators[j];
                     st.active = Some(c);
                     st.active_filters = filters;
                 }
                 (Some(prev), c) => {
-                    let c = c.unwrap_or(prev);
+                    // A class once found stays until the excitation allows another.
+                    let c = if c == FaultClass::Unclassified { prev } else { c };
                     let mut union = st.active_filters.clone();
                     for f in &filters {
                         if !union.contains(f) {

@@ -8,8 +8,11 @@ pub mod dialects {
 }
 
 pub mod frame;
+pub mod live;
 pub mod tlog;
 
 pub use dialects::ahcmon::MavMessage;
 pub use frame::{Frame, FrameCounters};
 pub use tlog::{TlogReader, TlogWriter};
+pub mod conn;
+pub use conn::{ConnError, ConnSpec, Link};

@@ -267,8 +267,8 @@ pub fn describe(d: &Decision) -> String {
     s
 }
 
-impl crate::pipeline::PipelineSink for MonitorFiles {
-    fn decision(&mut self, d: &Decision, _profile: &Profile) {
+impl MonitorFiles {
+    fn record(&mut self, d: &Decision) {
         if self.echo {
             println!("{}", describe(d));
         }
@@ -277,6 +277,16 @@ impl crate::pipeline::PipelineSink for MonitorFiles {
             self.keep(r);
         }
         self.seen.push(d.clone());
+    }
+}
+
+impl crate::pipeline::PipelineSink for MonitorFiles {
+    fn decision(&mut self, d: &Decision, _profile: &Profile) {
+        self.record(d);
+    }
+
+    fn link_event(&mut self, d: &Decision) {
+        self.record(d);
     }
 
     fn estimates(&mut self, t: f64, sysid: u8, est: &[&[AhcEstimate]; 2], profile: &Profile) {

@@ -2,6 +2,7 @@
 
 pub mod assembler;
 pub mod detect;
+pub mod encode;
 pub mod profile;
 
 pub use assembler::{Assembler, AssemblerConfig, TelemetryCounters, TelemetrySample, VehicleAssembler, VehicleInfo};

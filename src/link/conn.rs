@@ -1,0 +1,340 @@
+//! Live MAVLink connections, spelled as MAVProxy and rust-mavlink spell them:
+//! `udpin:HOST:PORT`, `udpout:HOST:PORT`, `udpbcast:HOST:PORT`, `tcpin:HOST:PORT`,
+//! `tcpout:HOST:PORT`, `serial:DEVICE:BAUD`.
+//!
+//! UDP and TCP are framed by our own [`StreamFramer`], so every dropped byte is counted (the
+//! `mavlink` crate's `recv` skips silently, shared/mavlink.md §1.2). Outgoing kinds (`udpout`,
+//! `tcpout`) reconnect; `udpin` answers the last peer it heard from.
+
+use super::frame::{Frame, FrameCounters, StreamFramer};
+use std::net::SocketAddr;
+use std::str::FromStr;
+use std::time::Duration;
+use thiserror::Error;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
+
+#[derive(Debug, Error)]
+pub enum ConnError {
+    #[error(
+        "connection `{0}`: expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD"
+    )]
+    Syntax(String),
+    #[error("connection `{spec}`: {source}")]
+    Io {
+        spec: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ConnSpec {
+    UdpIn(SocketAddr),
+    UdpOut(SocketAddr),
+    UdpBcast(SocketAddr),
+    TcpIn(SocketAddr),
+    TcpOut(SocketAddr),
+    Serial(String, u32),
+}
+
+impl FromStr for ConnSpec {
+    type Err = ConnError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || ConnError::Syntax(s.to_string());
+        let (kind, rest) = s.split_once(':').ok_or_else(bad)?;
+        if kind == "serial" {
+            let (dev, baud) = rest.rsplit_once(':').ok_or_else(bad)?;
+            let baud = baud.parse().map_err(|_| bad())?;
+            if dev.is_empty() {
+                return Err(bad());
+            }
+            return Ok(Self::Serial(dev.to_string(), baud));
+        }
+        // HOST may be a name (localhost): resolve it now, once.
+        let addr = std::net::ToSocketAddrs::to_socket_addrs(rest)
+            .ok()
+            .and_then(|mut a| a.next())
+            .ok_or_else(bad)?;
+        Ok(match kind {
+            "udpin" | "udp" => Self::UdpIn(addr),
+            "udpout" => Self::UdpOut(addr),
+            "udpbcast" => Self::UdpBcast(addr),
+            "tcpin" => Self::TcpIn(addr),
+            "tcpout" | "tcp" => Self::TcpOut(addr),
+            _ => return Err(bad()),
+        })
+    }
+}
+
+impl std::fmt::Display for ConnSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::UdpIn(a) => write!(f, "udpin:{a}"),
+            Self::UdpOut(a) => write!(f, "udpout:{a}"),
+            Self::UdpBcast(a) => write!(f, "udpbcast:{a}"),
+            Self::TcpIn(a) => write!(f, "tcpin:{a}"),
+            Self::TcpOut(a) => write!(f, "tcpout:{a}"),
+            Self::Serial(d, b) => write!(f, "serial:{d}:{b}"),
+        }
+    }
+}
+
+type SerialConn = mavlink_core::AsyncDialectConnection<
+    mavlink_core::static_dialect::StaticDialect<super::MavMessage>,
+>;
+
+enum Transport {
+    Udp {
+        sock: UdpSocket,
+        /// Where sends go: fixed for udpout/udpbcast, the last sender for udpin.
+        peer: Option<SocketAddr>,
+        learn_peer: bool,
+    },
+    TcpIn {
+        listener: TcpListener,
+        stream: Option<TcpStream>,
+    },
+    TcpOut {
+        addr: SocketAddr,
+        stream: Option<TcpStream>,
+    },
+    Serial(Box<SerialConn>),
+}
+
+/// One live connection: receive frames, send encoded frames.
+pub struct Link {
+    pub spec: ConnSpec,
+    transport: Transport,
+    framer: StreamFramer,
+    buf: Vec<u8>,
+    /// Times an outgoing TCP connection was re-established.
+    pub reconnects: u64,
+}
+
+impl Link {
+    pub async fn open(spec: ConnSpec) -> Result<Self, ConnError> {
+        let io = |source| ConnError::Io {
+            spec: spec.to_string(),
+            source,
+        };
+        let transport = match &spec {
+            ConnSpec::UdpIn(a) => Transport::Udp {
+                sock: UdpSocket::bind(a).await.map_err(io)?,
+                peer: None,
+                learn_peer: true,
+            },
+            ConnSpec::UdpOut(a) => {
+                let local: SocketAddr = if a.is_ipv4() {
+                    "0.0.0.0:0".parse().expect("literal")
+                } else {
+                    "[::]:0".parse().expect("literal")
+                };
+                Transport::Udp {
+                    sock: UdpSocket::bind(local).await.map_err(io)?,
+                    peer: Some(*a),
+                    learn_peer: false,
+                }
+            }
+            ConnSpec::UdpBcast(a) => {
+                let sock = UdpSocket::bind("0.0.0.0:0").await.map_err(io)?;
+                sock.set_broadcast(true).map_err(io)?;
+                Transport::Udp {
+                    sock,
+                    peer: Some(*a),
+                    learn_peer: false,
+                }
+            }
+            ConnSpec::TcpIn(a) => Transport::TcpIn {
+                listener: TcpListener::bind(a).await.map_err(io)?,
+                stream: None,
+            },
+            ConnSpec::TcpOut(a) => Transport::TcpOut {
+                addr: *a,
+                stream: TcpStream::connect(a).await.ok(),
+            },
+            ConnSpec::Serial(dev, baud) => {
+                use mavlink_core::AsyncMavConnection;
+                let mut conn = mavlink_core::connect_async::<super::MavMessage>(&format!(
+                    "serial:{dev}:{baud}"
+                ))
+                .await
+                .map_err(io)?;
+                conn.set_allow_recv_any_version(true);
+                Transport::Serial(Box::new(conn))
+            }
+        };
+        Ok(Self {
+            spec,
+            transport,
+            framer: StreamFramer::default(),
+            buf: vec![0; 65536],
+            reconnects: 0,
+        })
+    }
+
+    /// The local address (UDP/TCP), e.g. to learn the port of `udpin:127.0.0.1:0`.
+    pub fn local_addr(&self) -> Option<SocketAddr> {
+        match &self.transport {
+            Transport::Udp { sock, .. } => sock.local_addr().ok(),
+            Transport::TcpIn { listener, .. } => listener.local_addr().ok(),
+            _ => None,
+        }
+    }
+
+    pub fn counters(&self) -> FrameCounters {
+        self.framer.counters
+    }
+
+    /// Next frame; waits as long as it takes (wrap in a timeout for link-loss detection).
+    /// I/O errors of outgoing TCP are absorbed by reconnecting (every second).
+    pub async fn recv(&mut self) -> Result<Frame, ConnError> {
+        loop {
+            if let Some(f) = self.framer.next_frame() {
+                return Ok(f);
+            }
+            let io = |spec: &ConnSpec, source| ConnError::Io {
+                spec: spec.to_string(),
+                source,
+            };
+            match &mut self.transport {
+                Transport::Udp {
+                    sock,
+                    peer,
+                    learn_peer,
+                } => match sock.recv_from(&mut self.buf).await {
+                    Ok((n, from)) => {
+                        if *learn_peer {
+                            *peer = Some(from);
+                        }
+                        self.framer.push(&self.buf[..n]);
+                        // Parse this datagram completely before the next one.
+                        if let Some(f) = self.framer.next_frame() {
+                            return Ok(f);
+                        }
+                        self.framer.end_datagram();
+                    }
+                    // e.g. ICMP port unreachable after a send: not fatal for a datagram link.
+                    Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
+                    Err(e) => return Err(io(&self.spec, e)),
+                },
+                Transport::TcpIn { listener, stream } => match stream {
+                    None => {
+                        let (s, _) = listener.accept().await.map_err(|e| io(&self.spec, e))?;
+                        *stream = Some(s);
+                    }
+                    Some(s) => match s.read(&mut self.buf).await {
+                        Ok(0) | Err(_) => *stream = None,
+                        Ok(n) => self.framer.push(&self.buf[..n]),
+                    },
+                },
+                Transport::TcpOut { addr, stream } => match stream {
+                    None => {
+                        tokio::time::sleep(Duration::from_secs(1)).await;
+                        if let Ok(s) = TcpStream::connect(*addr).await {
+                            *stream = Some(s);
+                            self.reconnects += 1;
+                        }
+                    }
+                    Some(s) => match s.read(&mut self.buf).await {
+                        Ok(0) | Err(_) => *stream = None,
+                        Ok(n) => self.framer.push(&self.buf[..n]),
+                    },
+                },
+                Transport::Serial(conn) => {
+                    use mavlink_core::AsyncMavConnection;
+                    // The crate frames serial itself (no drop counts available there).
+                    let raw = conn.recv_raw().await.map_err(|e| {
+                        io(&self.spec, std::io::Error::other(e.to_string()))
+                    })?;
+                    let mut bytes = Vec::with_capacity(super::frame::MAX_FRAME);
+                    match raw {
+                        mavlink_core::MAVLinkMessageRaw::V1(m) => {
+                            bytes.extend_from_slice(m.raw_bytes())
+                        }
+                        mavlink_core::MAVLinkMessageRaw::V2(m) => {
+                            bytes.extend_from_slice(m.raw_bytes())
+                        }
+                    }
+                    self.framer.push(&bytes);
+                }
+            }
+        }
+    }
+
+    /// Send one encoded frame. `Ok(false)`: nowhere to send yet (udpin before any peer,
+    /// tcp without a connection).
+    pub async fn send(&mut self, frame: &[u8]) -> Result<bool, ConnError> {
+        let spec = self.spec.to_string();
+        let io = |source| ConnError::Io {
+            spec: spec.clone(),
+            source,
+        };
+        match &mut self.transport {
+            Transport::Udp { sock, peer, .. } => match peer {
+                Some(p) => match sock.send_to(frame, *p).await {
+                    Ok(_) => Ok(true),
+                    Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => Ok(false),
+                    Err(e) => Err(io(e)),
+                },
+                None => Ok(false),
+            },
+            Transport::TcpIn { listener, stream } => {
+                if stream.is_none() {
+                    // A sender waits for its first client.
+                    let (s, _) = listener.accept().await.map_err(io)?;
+                    *stream = Some(s);
+                }
+                match stream.as_mut().map(|s| s.write_all(frame)) {
+                    Some(w) => match w.await {
+                        Ok(()) => Ok(true),
+                        Err(_) => {
+                            *stream = None;
+                            Ok(false)
+                        }
+                    },
+                    None => Ok(false),
+                }
+            }
+            Transport::TcpOut { addr, stream } => {
+                if stream.is_none() {
+                    match TcpStream::connect(*addr).await {
+                        Ok(s) => {
+                            *stream = Some(s);
+                            self.reconnects += 1;
+                        }
+                        Err(_) => return Ok(false),
+                    }
+                }
+                match stream.as_mut().map(|s| s.write_all(frame)) {
+                    Some(w) => match w.await {
+                        Ok(()) => Ok(true),
+                        Err(_) => {
+                            *stream = None;
+                            Ok(false)
+                        }
+                    },
+                    None => Ok(false),
+                }
+            }
+            Transport::Serial(conn) => {
+                use mavlink_core::AsyncMavConnection;
+                // Re-parse our own bytes into a message for the crate's writer.
+                match super::frame::parse(frame) {
+                    super::frame::Parsed::Frame(f, _) => {
+                        let header = mavlink_core::MavHeader {
+                            system_id: f.sysid.into(),
+                            component_id: f.compid,
+                            sequence: f.seq,
+                        };
+                        conn.send(&header, &f.msg)
+                            .await
+                            .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+                        Ok(true)
+                    }
+                    _ => Ok(false),
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,133 @@
+//! The live monitor loop on tokio: a reader task turns the link's bytes into frames and
+//! hands them over a bounded channel to the estimating side, which never blocks the reader.
+//! Link loss per vehicle becomes a `link_lost` decision, its end `link_restored`.
+
+use super::conn::Link;
+use super::frame::{Frame, FrameCounters};
+use crate::diagnose::vehicle::{Decision, Event};
+use crate::monitor::Monitor;
+use crate::pipeline::PipelineSink;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+use tokio::sync::mpsc;
+
+#[derive(Debug, Clone, Copy)]
+pub struct LiveOptions {
+    /// No frame from a vehicle for this long: `link_lost`.
+    pub link_timeout: Duration,
+    /// Stop after this long without any frame, once frames have arrived (end of a sim).
+    pub exit_idle: Option<Duration>,
+    /// Frames buffered between the reader and the estimators.
+    pub channel_capacity: usize,
+}
+
+impl Default for LiveOptions {
+    fn default() -> Self {
+        Self {
+            link_timeout: Duration::from_secs(2),
+            exit_idle: None,
+            channel_capacity: 4096,
+        }
+    }
+}
+
+/// What the reader saw, for the summary.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LiveCounters {
+    pub link: FrameCounters,
+    /// Frames dropped because the estimating side fell behind (channel full).
+    pub backpressure_drops: u64,
+}
+
+/// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters.
+pub async fn run(
+    mut link: Link,
+    monitor: &mut Monitor,
+    sink: &mut dyn PipelineSink,
+    opts: LiveOptions,
+) -> Result<LiveCounters, super::conn::ConnError> {
+    let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
+    let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
+    let reader = tokio::spawn(async move {
+        let mut drops = 0u64;
+        let result = loop {
+            tokio::select! {
+                r = link.recv() => match r {
+                    Ok(frame) => {
+                        if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
+                            drops += 1;
+                        }
+                    }
+                    Err(e) => break Err(e),
+                },
+                () = tx.closed() => break Ok(()),
+            }
+        };
+        let _ = done_tx.send(result.map(|()| LiveCounters {
+            link: link.counters(),
+            backpressure_drops: drops,
+        }));
+    });
+    let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
+    let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
+    let mut any_frame: Option<Instant> = None;
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    loop {
+        tokio::select! {
+            frame = rx.recv() => {
+                let Some(frame) = frame else { break };
+                let now = Instant::now();
+                any_frame = Some(now);
+                if frame.sysid != 255 && frame.sysid != 0 {
+                    last_seen.insert(frame.sysid, now);
+                    if lost.insert(frame.sysid, false) == Some(true) {
+                        let t = vehicle_time(monitor, frame.sysid);
+                        sink.link_event(&Decision::monitor(t, frame.sysid, Event::LinkRestored, "frames arrive again"));
+                    }
+                }
+                monitor.on_frame(&frame, sink);
+            }
+            _ = tick.tick() => {
+                let now = Instant::now();
+                for (sysid, seen) in &last_seen {
+                    // Only vehicles the monitor knows (not every stray system id).
+                    if !monitor.assembler.vehicles.contains_key(sysid) {
+                        continue;
+                    }
+                    let gone = now.duration_since(*seen) > opts.link_timeout;
+                    if gone && lost.get(sysid) != Some(&true) {
+                        lost.insert(*sysid, true);
+                        let t = vehicle_time(monitor, *sysid);
+                        let detail = format!("no frame for {:.1} s", opts.link_timeout.as_secs_f64());
+                        sink.link_event(&Decision::monitor(t, *sysid, Event::LinkLost, detail));
+                    }
+                }
+                if let (Some(idle), Some(last)) = (opts.exit_idle, any_frame)
+                    && now.duration_since(last) > idle
+                {
+                    break;
+                }
+            }
+            _ = &mut ctrl_c => break,
+        }
+    }
+    // Closing the channel ends the reader, which hands back its counters.
+    drop(rx);
+    monitor.finish(sink);
+    let result = tokio::time::timeout(Duration::from_secs(1), done_rx).await;
+    reader.abort();
+    match result {
+        Ok(Ok(r)) => r,
+        _ => Ok(LiveCounters::default()),
+    }
+}
+
+fn vehicle_time(monitor: &Monitor, sysid: u8) -> f64 {
+    monitor
+        .pipelines
+        .get(&sysid)
+        .and_then(|p| p.last_sample_t)
+        .unwrap_or(0.0)
+}
