@@ -147,6 +147,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
         include_str!("../replay/scenarios/quad-x-motor2-loe.toml"),
     ),
     (
+        "quad-x-motor2-loe-live",
+        include_str!("../replay/scenarios/quad-x-motor2-loe-live.toml"),
+    ),
+    (
         "quad-x-motor4-bias",
         include_str!("../replay/scenarios/quad-x-motor4-bias.toml"),
     ),
@@ -173,6 +177,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
     (
         "heli-swash2-loe",
         include_str!("../replay/scenarios/heli-swash2-loe.toml"),
+    ),
+    (
+        "heli-swash2-loe-live",
+        include_str!("../replay/scenarios/heli-swash2-loe-live.toml"),
     ),
     (
         "heli-tail-bias",
