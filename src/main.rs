@@ -7,8 +7,8 @@ use ahcmon::monitor::Monitor;
 use ahcmon::output::jsonl::{MonitorFiles, RunFiles};
 use ahcmon::output::{summary, svg, table};
 use ahcmon::pipeline::PipelineConfig;
-use ahcmon::telemetry::{Profile, ProfileError};
 use ahcmon::scenario::{self, NamedScenario, ScenarioError};
+use ahcmon::telemetry::{Profile, ProfileError};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use std::io::IsTerminal;
@@ -150,15 +150,14 @@ struct RunArgs {
 
 impl RunArgs {
     fn pipeline_config(&self) -> anyhow::Result<PipelineConfig> {
-        let profile = self
-            .profile
-            .as_deref()
-            .map(Profile::resolve)
-            .transpose()?;
+        let profile = self.profile.as_deref().map(Profile::resolve).transpose()?;
         if let Some(t) = self.calibrate_until
             && !(t.is_finite() && t > 0.0)
         {
-            return Err(UsageError(format!("--calibrate-until {t}: must be a positive time in s")).into());
+            return Err(UsageError(format!(
+                "--calibrate-until {t}: must be a positive time in s"
+            ))
+            .into());
         }
         Ok(PipelineConfig {
             profile,
@@ -168,8 +167,12 @@ impl RunArgs {
     }
 
     fn files(&self) -> anyhow::Result<MonitorFiles> {
-        MonitorFiles::new(self.decisions.as_deref(), self.estimates.as_deref(), self.decimate)
-            .context("cannot create output file")
+        MonitorFiles::new(
+            self.decisions.as_deref(),
+            self.estimates.as_deref(),
+            self.decimate,
+        )
+        .context("cannot create output file")
     }
 }
 
@@ -336,7 +339,11 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         .map(|p| JsonlWriter::create(p).with_context(|| format!("cannot create {}", p.display())))
         .transpose()?;
     let steps = named.scenario.steps();
-    let pace = if spec.is_some() { Some(speed.unwrap_or(1.0)) } else { speed };
+    let pace = if spec.is_some() {
+        Some(speed.unwrap_or(1.0))
+    } else {
+        speed
+    };
     // tlog time: now when live, a fixed epoch otherwise (reproducible files).
     let epoch_us = if spec.is_some() {
         std::time::SystemTime::now()
@@ -362,7 +369,18 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
             let next = sim.step();
             msgs.clear();
             // Rates of this instant with the outputs commanded now (they act until the next).
-            enc.messages(prev.t, [prev.y[0], prev.y[1], prev.y[2]], prev.attitude, if vehicle.model.measure_az { prev.y[3] } else { -9.80665 }, &next.u[..vehicle.actuators.len()], &mut msgs);
+            enc.messages(
+                prev.t,
+                [prev.y[0], prev.y[1], prev.y[2]],
+                prev.attitude,
+                if vehicle.model.measure_az {
+                    prev.y[3]
+                } else {
+                    -9.80665
+                },
+                &next.u[..vehicle.actuators.len()],
+                &mut msgs,
+            );
             if let Some(x) = pace {
                 let due = started + std::time::Duration::from_secs_f64(prev.t / x);
                 tokio::time::sleep_until(due).await;
@@ -371,7 +389,9 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
             for m in &msgs {
                 ahcmon::link::frame::encode_v2(o.sysid, 1, seq, m, &mut frame);
                 seq = seq.wrapping_add(1);
-                *counts.entry(mavlink_core::Message::message_name(m)).or_insert(0) += 1;
+                *counts
+                    .entry(mavlink_core::Message::message_name(m))
+                    .or_insert(0) += 1;
                 if let Some(w) = tlog.as_mut() {
                     w.write_raw(ts, &frame)?;
                 }
@@ -407,12 +427,24 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         list.join(", ")
     );
     if let Some(s) = &spec {
-        println!("sent {sent} frames to {s}{}", if unsent > 0 { format!(", {unsent} not sent (no peer yet)") } else { String::new() });
+        println!(
+            "sent {sent} frames to {s}{}",
+            if unsent > 0 {
+                format!(", {unsent} not sent (no peer yet)")
+            } else {
+                String::new()
+            }
+        );
     }
     Ok(())
 }
 
-fn monitor(conn: &str, args: &RunArgs, link_timeout: f64, exit_idle: Option<f64>) -> anyhow::Result<()> {
+fn monitor(
+    conn: &str,
+    args: &RunArgs,
+    link_timeout: f64,
+    exit_idle: Option<f64>,
+) -> anyhow::Result<()> {
     let spec: ConnSpec = conn.parse()?;
     let opts = ahcmon::link::live::LiveOptions {
         link_timeout: std::time::Duration::from_secs_f64(positive("--link-timeout", link_timeout)?),
@@ -426,7 +458,11 @@ fn monitor(conn: &str, args: &RunArgs, link_timeout: f64, exit_idle: Option<f64>
     let rt = runtime()?;
     let counters = rt.block_on(async {
         let link = Link::open(spec.clone()).await?;
-        eprintln!("monitor: listening on {spec}{}", link.local_addr().map_or(String::new(), |a| format!(" (local {a})")));
+        eprintln!(
+            "monitor: listening on {spec}{}",
+            link.local_addr()
+                .map_or(String::new(), |a| format!(" (local {a})"))
+        );
         ahcmon::link::live::run(link, &mut monitor, &mut files, opts).await
     })?;
     if let Some(e) = files.error.take() {
@@ -434,7 +470,10 @@ fn monitor(conn: &str, args: &RunArgs, link_timeout: f64, exit_idle: Option<f64>
     }
     print!("{}", summary::render(&monitor, &counters.link, &files.seen));
     if counters.backpressure_drops > 0 {
-        println!("{} frames dropped: the estimators fell behind", counters.backpressure_drops);
+        println!(
+            "{} frames dropped: the estimators fell behind",
+            counters.backpressure_drops
+        );
     }
     Ok(())
 }
@@ -451,7 +490,10 @@ fn replay(file: &std::path::Path, args: &RunArgs, speed: Option<f64>) -> anyhow:
     if let Some(x) = speed
         && !(x.is_finite() && x > 0.0)
     {
-        return Err(UsageError(format!("--speed {x}: must be a positive multiple of real time")).into());
+        return Err(UsageError(format!(
+            "--speed {x}: must be a positive multiple of real time"
+        ))
+        .into());
     }
     let input_error = |source| InputFileError {
         path: file.display().to_string(),
@@ -489,8 +531,15 @@ fn replay(file: &std::path::Path, args: &RunArgs, speed: Option<f64>) -> anyhow:
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
     }
-    print!("{}", summary::render(&monitor, &reader.counters, &files.seen));
-    println!("replayed {} in {:.2} s", file.display(), started.elapsed().as_secs_f64());
+    print!(
+        "{}",
+        summary::render(&monitor, &reader.counters, &files.seen)
+    );
+    println!(
+        "replayed {} in {:.2} s",
+        file.display(),
+        started.elapsed().as_secs_f64()
+    );
     Ok(())
 }
 

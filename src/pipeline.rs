@@ -6,7 +6,7 @@
 //! `--calibrate-until`) identifies the vehicle's magnitudes against the profile's geometry
 //! ([`calibrate_scaled`]); then both filters and the diagnosis run on every sample.
 
-use crate::diagnose::vehicle::{Decision, DiagnosisParams, Diagnoser, Event};
+use crate::diagnose::vehicle::{Decision, Diagnoser, DiagnosisParams, Event};
 use crate::estimate::vehicle::{AhcEstimate, VehicleFilters, build};
 use crate::model::MAX_ACTUATORS;
 use crate::model::calibrate::{CalibrationSample, ScaledFit, calibrate_scaled};
@@ -48,8 +48,7 @@ impl Default for PipelineConfig {
 pub trait PipelineSink {
     fn decision(&mut self, d: &Decision, profile: &Profile);
     /// Every filter step: both filters' estimates per actuator.
-    fn estimates(&mut self, _t: f64, _sysid: u8, _est: &[&[AhcEstimate]; 2], _profile: &Profile) {
-    }
+    fn estimates(&mut self, _t: f64, _sysid: u8, _est: &[&[AhcEstimate]; 2], _profile: &Profile) {}
     /// Progress and warnings, one line each.
     fn message(&mut self, sysid: u8, text: &str);
     /// A decision about the link rather than an actuator (`link_lost` / `link_restored`).
@@ -79,7 +78,7 @@ struct Running {
 enum Stage {
     Grounded,
     Calibrating {
-        profile: Profile,
+        profile: Box<Profile>,
         samples: Vec<StoredSample>,
     },
     Running(Box<Running>),
@@ -119,7 +118,11 @@ pub struct VehiclePipeline {
 
 fn median_interval(ts: impl Iterator<Item = f64>) -> f64 {
     let v: Vec<f64> = ts.collect();
-    let mut d: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    let mut d: Vec<f64> = v
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .collect();
     if d.is_empty() {
         return 0.02;
     }
@@ -199,14 +202,22 @@ impl VehiclePipeline {
         Some(u)
     }
 
-    pub fn on_sample(&mut self, s: &TelemetrySample, info: &VehicleInfo, sink: &mut dyn PipelineSink) {
+    pub fn on_sample(
+        &mut self,
+        s: &TelemetrySample,
+        info: &VehicleInfo,
+        sink: &mut dyn PipelineSink,
+    ) {
         self.last_sample_t = Some(s.t);
         let airborne = self.airborne(s);
         if !airborne {
             self.airborne_since = None;
             match &mut self.stage {
                 Stage::Calibrating { .. } => {
-                    sink.message(self.sysid, "landed during calibration; starting over at the next take-off");
+                    sink.message(
+                        self.sysid,
+                        "landed during calibration; starting over at the next take-off",
+                    );
                     self.stage = Stage::Grounded;
                 }
                 Stage::Running(r) => r.prev_u = None,
@@ -236,10 +247,13 @@ impl VehiclePipeline {
                         }
                         sink.message(
                             self.sysid,
-                            &format!("airborne at t={since:.2} s; profile {}; calibrating", d.source),
+                            &format!(
+                                "airborne at t={since:.2} s; profile {}; calibrating",
+                                d.source
+                            ),
                         );
                         self.stage = Stage::Calibrating {
-                            profile: d.profile.clone(),
+                            profile: Box::new(d.profile.clone()),
                             samples: Vec::with_capacity(2048),
                         };
                         self.detection = Some(d);
@@ -266,7 +280,7 @@ impl VehiclePipeline {
                     None => s.t - start >= self.cfg.calibrate_s,
                 };
                 if done {
-                    let profile = profile.clone();
+                    let profile = (**profile).clone();
                     let samples = std::mem::take(samples);
                     self.start_running(profile, &samples, sink);
                 }
@@ -305,7 +319,10 @@ impl VehiclePipeline {
                             s.t,
                             self.sysid,
                             Event::FilterReset,
-                            format!("{} update failed; reset", crate::estimate::vehicle::FILTER_NAMES[f]),
+                            format!(
+                                "{} update failed; reset",
+                                crate::estimate::vehicle::FILTER_NAMES[f]
+                            ),
                         );
                         sink.decision(&d, &r.profile);
                         self.counters.decisions += 1;
@@ -330,7 +347,12 @@ impl VehiclePipeline {
         }
     }
 
-    fn start_running(&mut self, profile: Profile, samples: &[StoredSample], sink: &mut dyn PipelineSink) {
+    fn start_running(
+        &mut self,
+        profile: Profile,
+        samples: &[StoredSample],
+        sink: &mut dyn PipelineSink,
+    ) {
         let dt = median_interval(samples.iter().map(|s| s.t));
         let l = profile.actuators.len();
         let mut profile = profile;
@@ -349,7 +371,11 @@ impl VehiclePipeline {
             .map(|w| CalibrationSample {
                 rates: w[1].rates,
                 u: &w[0].u[..l],
-                az: if profile.model.measure_az { w[1].az } else { None },
+                az: if profile.model.measure_az {
+                    w[1].az
+                } else {
+                    None
+                },
             })
             .filter(|c| !profile.model.measure_az || c.az.is_some())
             .collect();
@@ -367,7 +393,11 @@ impl VehiclePipeline {
         // Process noise from what the model could not explain on the healthy stretch, but
         // never below the profile's: a calm stretch (a still hover) would otherwise make the
         // filters trust the model more than any manoeuvre or fault transient deserves.
-        let rate_sd = fit.quality.residual_std[..3].iter().map(|v| v * v).sum::<f64>() / 3.0;
+        let rate_sd = fit.quality.residual_std[..3]
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            / 3.0;
         calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
         if calibrated.model.measure_az
             && let Some(sd) = fit.quality.residual_std.get(3)

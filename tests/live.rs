@@ -25,7 +25,7 @@ fn decisions(path: &Path) -> Vec<Value> {
         .collect()
 }
 
-fn faults<'a>(ds: &'a [Value], sysid: u64) -> Vec<&'a Value> {
+fn faults(ds: &[Value], sysid: u64) -> Vec<&Value> {
     ds.iter()
         .filter(|d| d["sysid"] == sysid && (d["event"] == "fault" || d["event"] == "changed"))
         .collect()
@@ -36,8 +36,14 @@ fn run_live(sims: &[(&str, u8)], name: &str) -> Vec<Value> {
     let dir = common::temp_dir(name);
     let dec = dir.join("decisions.jsonl");
     let port = free_udp_port();
-    let mut monitor = Command::new(bin())
-        .args(["monitor", &format!("udpin:127.0.0.1:{port}"), "--headless", "--exit-idle", "2"])
+    let monitor = Command::new(bin())
+        .args([
+            "monitor",
+            &format!("udpin:127.0.0.1:{port}"),
+            "--headless",
+            "--exit-idle",
+            "2",
+        ])
         .arg("--decisions")
         .arg(&dec)
         .stdout(Stdio::piped())
@@ -86,7 +92,10 @@ fn heli_servo_fault_over_udp_between_two_processes() {
     assert!((45.0..=47.0).contains(&t), "detected at {t}");
     assert!(f.iter().all(|d| d["actuator"] == "swash2"), "{f:?}");
     // The end of the stream is a lost link.
-    assert!(ds.iter().any(|d| d["event"] == "link_lost" && d["sysid"] == 1));
+    assert!(
+        ds.iter()
+            .any(|d| d["event"] == "link_lost" && d["sysid"] == 1)
+    );
 }
 
 #[test]
@@ -144,8 +153,9 @@ fn sim_tlog_loads_in_pymavlink_with_the_same_counts() {
 
 #[test]
 fn corrupted_real_log_is_counted_and_still_estimated() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("replay/tlogs/sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join(
+        "replay/tlogs/sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+    );
     let mut bytes = std::fs::read(src).unwrap();
     // Flip a byte every 10 kB, insert garbage in the middle, cut the tail, append noise.
     let mut i = 5000;
@@ -154,7 +164,9 @@ fn corrupted_real_log_is_counted_and_still_estimated() {
         i += 10_007;
     }
     let mid = bytes.len() / 2;
-    let garbage: Vec<u8> = (0..3000u32).map(|k| (k.wrapping_mul(2654435761) >> 13) as u8).collect();
+    let garbage: Vec<u8> = (0..3000u32)
+        .map(|k| (k.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
     bytes.splice(mid..mid, garbage.iter().copied());
     bytes.truncate(bytes.len() - 7);
     bytes.extend_from_slice(&garbage);
@@ -169,11 +181,17 @@ fn corrupted_real_log_is_counted_and_still_estimated() {
         .arg(&est)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let summary = String::from_utf8_lossy(&out.stdout);
     let link = summary.lines().find(|l| l.starts_with("link: ")).unwrap();
     let count = |key: &str| -> u64 {
-        let at = link.find(key).unwrap_or_else(|| panic!("{key} missing in {link}"));
+        let at = link
+            .find(key)
+            .unwrap_or_else(|| panic!("{key} missing in {link}"));
         link[at + key.len()..]
             .split_whitespace()
             .next()

@@ -6,7 +6,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("replay/tlogs").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("replay/tlogs")
+        .join(rel)
 }
 
 fn read_all(bytes: &[u8]) -> (Vec<(u64, u32)>, ahcmon::link::FrameCounters) {
@@ -23,7 +25,10 @@ fn ardusub_logs_frame_counts_match_pymavlink() {
     // Expected counts from SOURCES.md (pymavlink 2.4.50, 0 bad data).
     for (file, expected) in [
         ("mavlink/rust-mavlink-log.tlog", 1426),
-        ("mavlink/mavlink-server-00025-2024-04-22_18-49-07.tlog", 30439),
+        (
+            "mavlink/mavlink-server-00025-2024-04-22_18-49-07.tlog",
+            30439,
+        ),
     ] {
         let bytes = std::fs::read(data(file)).unwrap();
         let (frames, c) = read_all(&bytes);
@@ -191,7 +196,8 @@ fn writer_round_trips_through_the_reader() {
                 servo9_raw: 1234,
                 ..Default::default()
             };
-            w.write(ts, 1, 1, &MavMessage::SERVO_OUTPUT_RAW(servo)).unwrap();
+            w.write(ts, 1, 1, &MavMessage::SERVO_OUTPUT_RAW(servo))
+                .unwrap();
         }
         w.flush().unwrap();
     }

@@ -431,7 +431,11 @@ impl Diagnoser {
                 }
                 (Some(prev), c) => {
                     // A class once found stays until the excitation allows another.
-                    let c = if c == FaultClass::Unclassified { prev } else { c };
+                    let c = if c == FaultClass::Unclassified {
+                        prev
+                    } else {
+                        c
+                    };
                     let mut union = st.active_filters.clone();
                     for f in &filters {
                         if !union.contains(f) {

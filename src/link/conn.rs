@@ -244,9 +244,10 @@ impl Link {
                 Transport::Serial(conn) => {
                     use mavlink_core::AsyncMavConnection;
                     // The crate frames serial itself (no drop counts available there).
-                    let raw = conn.recv_raw().await.map_err(|e| {
-                        io(&self.spec, std::io::Error::other(e.to_string()))
-                    })?;
+                    let raw = conn
+                        .recv_raw()
+                        .await
+                        .map_err(|e| io(&self.spec, std::io::Error::other(e.to_string())))?;
                     let mut bytes = Vec::with_capacity(super::frame::MAX_FRAME);
                     match raw {
                         mavlink_core::MAVLinkMessageRaw::V1(m) => {

@@ -47,7 +47,8 @@ pub async fn run(
     opts: LiveOptions,
 ) -> Result<LiveCounters, super::conn::ConnError> {
     let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
-    let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
+    let (done_tx, done_rx) =
+        tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
     let reader = tokio::spawn(async move {
         let mut drops = 0u64;
         let result = loop {

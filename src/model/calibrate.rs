@@ -295,7 +295,8 @@ pub fn calibrate_scaled(
                 params.offset[axis] = c;
                 let mut rss = 0.0;
                 let mut tss = 0.0;
-                let mean = samples.iter().map(|s| s.rates[axis]).sum::<f64>() / samples.len() as f64;
+                let mean =
+                    samples.iter().map(|s| s.rates[axis]).sum::<f64>() / samples.len() as f64;
                 for k in 0..n + 1 {
                     let (s0, s1) = (&samples[k], &samples[k + 1]);
                     let pred = a * s0.rates[axis] + hold * (drive(axis, s1.u) + c);
@@ -311,7 +312,10 @@ pub fn calibrate_scaled(
             }
         }
     }
-    let with_az: Vec<_> = samples.iter().filter_map(|s| s.az.map(|a| (a, s.u))).collect();
+    let with_az: Vec<_> = samples
+        .iter()
+        .filter_map(|s| s.az.map(|a| (a, s.u)))
+        .collect();
     if !with_az.is_empty() && base.vertical.len() == l {
         let gz = |u: &[f64]| -> f64 { (0..l).map(|j| base.vertical[j] * u[j]).sum() };
         let mut x = DMatrix::<f64>::zeros(with_az.len(), 2);
@@ -321,8 +325,7 @@ pub fn calibrate_scaled(
             x[(k, 1)] = 1.0;
             y[k] = *a;
         }
-        let fitted = least_squares(&x, &y)
-            .filter(|(beta, _, _)| (0.1..=10.0).contains(&beta[0]));
+        let fitted = least_squares(&x, &y).filter(|(beta, _, _)| (0.1..=10.0).contains(&beta[0]));
         match fitted {
             Some((beta, r2, sd)) => {
                 for v in params.vertical.iter_mut() {

@@ -218,7 +218,11 @@ pub struct MonitorFiles {
 }
 
 impl MonitorFiles {
-    pub fn new(decisions: Option<&Path>, estimates: Option<&Path>, decimate: u64) -> std::io::Result<Self> {
+    pub fn new(
+        decisions: Option<&Path>,
+        estimates: Option<&Path>,
+        decimate: u64,
+    ) -> std::io::Result<Self> {
         Ok(Self {
             decisions: decisions.map(JsonlWriter::create).transpose()?,
             estimates: estimates.map(JsonlWriter::create).transpose()?,

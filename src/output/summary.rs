@@ -6,11 +6,18 @@ use crate::link::FrameCounters;
 use crate::monitor::Monitor;
 use std::fmt::Write;
 
-pub fn render(monitor: &Monitor, frames: &FrameCounters, decisions: &[crate::diagnose::vehicle::Decision]) -> String {
+pub fn render(
+    monitor: &Monitor,
+    frames: &FrameCounters,
+    decisions: &[crate::diagnose::vehicle::Decision],
+) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "link: {frames}");
     if monitor.assembler.vehicles.is_empty() {
-        let _ = writeln!(s, "no vehicle seen (no autopilot HEARTBEAT, ATTITUDE or SERVO_OUTPUT_RAW)");
+        let _ = writeln!(
+            s,
+            "no vehicle seen (no autopilot HEARTBEAT, ATTITUDE or SERVO_OUTPUT_RAW)"
+        );
     }
     for (sysid, v) in &monitor.assembler.vehicles {
         let c = &v.counters;
@@ -19,7 +26,9 @@ pub fn render(monitor: &Monitor, frames: &FrameCounters, decisions: &[crate::dia
             "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots, {} non-finite",
             v.info
                 .mav_type
-                .map_or("unknown".to_string(), |t| format!("{t:?}").trim_start_matches("MAV_TYPE_").to_lowercase()),
+                .map_or("unknown".to_string(), |t| format!("{t:?}")
+                    .trim_start_matches("MAV_TYPE_")
+                    .to_lowercase()),
             c.samples,
             c.unmatched,
             c.out_of_order,
@@ -28,7 +37,10 @@ pub fn render(monitor: &Monitor, frames: &FrameCounters, decisions: &[crate::dia
             c.non_finite
         );
         let Some(p) = monitor.pipelines.get(sysid) else {
-            let _ = writeln!(s, "  no complete samples (rates and outputs of the same instant)");
+            let _ = writeln!(
+                s,
+                "  no complete samples (rates and outputs of the same instant)"
+            );
             continue;
         };
         let pc = &p.counters;
@@ -50,8 +62,14 @@ pub fn render(monitor: &Monitor, frames: &FrameCounters, decisions: &[crate::dia
         let _ = writeln!(s, "  final estimates at t={t:.2} s:");
         let _ = writeln!(
             s,
-            "    {:<10} {:>3}  {:<8} {:>24} {:>27}  {:>17}  {:>9}  {}",
-            "actuator", "ch", "filter", "gamma [bounds]", "delta [bounds]", "q_gamma q_delta", "decisions", "state"
+            "    {:<10} {:>3}  {:<8} {:>24} {:>27}  {:>17}  {:>9}  state",
+            "actuator",
+            "ch",
+            "filter",
+            "gamma [bounds]",
+            "delta [bounds]",
+            "q_gamma q_delta",
+            "decisions",
         );
         for (j, a) in profile.actuators.iter().enumerate() {
             let n = decisions
@@ -65,7 +83,11 @@ pub fn render(monitor: &Monitor, frames: &FrameCounters, decisions: &[crate::dia
                     s,
                     "    {:<10} {:>3}  {:<8} {:>6.3} [{:>6.3}, {:>6.3}] {:>+7.3} [{:>+7.3}, {:>+7.3}]  {:>8.1e} {:>8.1e}  {:>9}  {}",
                     if f == 0 { a.name.as_str() } else { "" },
-                    if f == 0 { a.channel.to_string() } else { String::new() },
+                    if f == 0 {
+                        a.channel.to_string()
+                    } else {
+                        String::new()
+                    },
                     name,
                     e.gamma,
                     e.gamma_lo,

@@ -143,7 +143,7 @@ impl VehicleAssembler {
         }
     }
 
-    fn from_autopilot(&self, compid: u8) -> bool {
+    fn is_autopilot_component(&self, compid: u8) -> bool {
         match self.info.compid {
             Some(c) => c == compid,
             // Before the autopilot's heartbeat: MAV_COMP_ID_AUTOPILOT1.
@@ -178,7 +178,7 @@ impl VehicleAssembler {
     /// Feed one message; complete instants are appended to `out` (in time order).
     pub fn on_message(&mut self, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
         // A new rate instant releases a sample still waiting for its a_z, without it.
-        if matches!(msg, MavMessage::ATTITUDE(_)) && self.from_autopilot(compid) {
+        if matches!(msg, MavMessage::ATTITUDE(_)) && self.is_autopilot_component(compid) {
             out.extend(self.pending.take());
         }
         let emitted = self.message(compid, msg);
@@ -225,7 +225,7 @@ impl VehicleAssembler {
                 }
                 None
             }
-            _ if !self.from_autopilot(compid) => None,
+            _ if !self.is_autopilot_component(compid) => None,
             MavMessage::PARAM_VALUE(p) => {
                 let name = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
                 if !name.is_empty() && p.param_value.is_finite() {
@@ -398,7 +398,13 @@ impl Assembler {
 
     /// Feed one frame; complete samples of its vehicle are appended to `out`. GCS traffic
     /// (sysid 255 and MAV_TYPE_GCS heartbeats) never makes a vehicle.
-    pub fn on_frame(&mut self, sysid: u8, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
+    pub fn on_frame(
+        &mut self,
+        sysid: u8,
+        compid: u8,
+        msg: &MavMessage,
+        out: &mut Vec<TelemetrySample>,
+    ) {
         if sysid == 255 || sysid == 0 {
             return;
         }

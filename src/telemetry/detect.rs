@@ -9,9 +9,13 @@ use thiserror::Error;
 
 #[derive(Debug, Error)]
 pub enum DetectError {
-    #[error("sysid {sysid}: no heartbeat from an autopilot yet, so the vehicle type is unknown; pass --profile NAME|FILE")]
+    #[error(
+        "sysid {sysid}: no heartbeat from an autopilot yet, so the vehicle type is unknown; pass --profile NAME|FILE"
+    )]
     NoHeartbeat { sysid: u8 },
-    #[error("sysid {sysid}: no built-in profile for MAV_TYPE {mav_type:?}; pass --profile NAME|FILE")]
+    #[error(
+        "sysid {sysid}: no built-in profile for MAV_TYPE {mav_type:?}; pass --profile NAME|FILE"
+    )]
     Unsupported { sysid: u8, mav_type: MavType },
     #[error(transparent)]
     Profile(#[from] ProfileError),
@@ -87,7 +91,12 @@ pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
             "hexa-x"
         }
         MavType::MAV_TYPE_FIXED_WING => "plane",
-        other => return Err(DetectError::Unsupported { sysid, mav_type: other }),
+        other => {
+            return Err(DetectError::Unsupported {
+                sysid,
+                mav_type: other,
+            });
+        }
     };
     if let Some(fc) = frame_class {
         let expected = match name {
@@ -106,7 +115,11 @@ pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
     let mapped = apply_params(&mut profile, info);
     let source = format!(
         "{name} (from HEARTBEAT {mav_type:?}{}{})",
-        if frame_type.is_some() { ", FRAME_TYPE" } else { "" },
+        if frame_type.is_some() {
+            ", FRAME_TYPE"
+        } else {
+            ""
+        },
         if mapped > 0 {
             format!(", {mapped} outputs from SERVOn_* parameters")
         } else {

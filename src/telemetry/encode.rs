@@ -5,9 +5,9 @@
 
 use super::{Profile, Role, VehicleKind};
 use crate::link::dialects::ahcmon::{
-    ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage,
-    MavModeFlag, MavParamType, MavState, MavSysStatusSensor, MavType, PARAM_VALUE_DATA,
-    RAW_IMU_DATA, SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag,
+    MavParamType, MavState, MavSysStatusSensor, MavType, PARAM_VALUE_DATA, RAW_IMU_DATA,
+    SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
 };
 
 const G0: f64 = 9.80665;
@@ -43,7 +43,11 @@ impl SimTelemetry {
                 params.push(("H_SW_TYPE".into(), 3.0));
             }
             VehicleKind::Multirotor => {
-                let class = if profile.actuators.len() == 6 { 2.0 } else { 1.0 };
+                let class = if profile.actuators.len() == 6 {
+                    2.0
+                } else {
+                    1.0
+                };
                 params.push(("FRAME_CLASS".into(), class));
                 let plus = profile.name.contains("plus");
                 params.push(("FRAME_TYPE".into(), if plus { 0.0 } else { 1.0 }));
@@ -69,7 +73,10 @@ impl SimTelemetry {
             params.push((format!("SERVO{n}_MIN"), a.pwm_min as f32));
             params.push((format!("SERVO{n}_TRIM"), a.pwm_trim as f32));
             params.push((format!("SERVO{n}_MAX"), a.pwm_max as f32));
-            params.push((format!("SERVO{n}_REVERSED"), f32::from(u8::from(a.reversed))));
+            params.push((
+                format!("SERVO{n}_REVERSED"),
+                f32::from(u8::from(a.reversed)),
+            ));
         }
         Self {
             profile: profile.clone(),

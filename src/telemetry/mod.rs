@@ -5,5 +5,7 @@ pub mod detect;
 pub mod encode;
 pub mod profile;
 
-pub use assembler::{Assembler, AssemblerConfig, TelemetryCounters, TelemetrySample, VehicleAssembler, VehicleInfo};
+pub use assembler::{
+    Assembler, AssemblerConfig, TelemetryCounters, TelemetrySample, VehicleAssembler, VehicleInfo,
+};
 pub use profile::{Profile, ProfileError, Role, VehicleKind};
