@@ -123,6 +123,10 @@ enum Command {
         /// No dashboard (the dashboard is not built yet: replay is always headless for now).
         #[arg(long)]
         headless: bool,
+        /// Draw every actuator's gamma and delta with both filters' bounds and the decisions
+        /// into this SVG file.
+        #[arg(long, value_name = "FILE.svg")]
+        plot: Option<PathBuf>,
     },
 }
 
@@ -281,7 +285,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             speed,
             fast: _,
             headless: _,
-        } => replay(&file, &run, speed),
+            plot,
+        } => replay(&file, &run, speed, plot.as_deref()),
     }
 }
 
@@ -486,7 +491,12 @@ struct InputFileError {
     source: std::io::Error,
 }
 
-fn replay(file: &std::path::Path, args: &RunArgs, speed: Option<f64>) -> anyhow::Result<()> {
+fn replay(
+    file: &std::path::Path,
+    args: &RunArgs,
+    speed: Option<f64>,
+    plot: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
     if let Some(x) = speed
         && !(x.is_finite() && x > 0.0)
     {
@@ -503,6 +513,11 @@ fn replay(file: &std::path::Path, args: &RunArgs, speed: Option<f64>) -> anyhow:
     let mut reader = TlogReader::open(file).map_err(input_error)?;
     let mut monitor = Monitor::new(args.pipeline_config()?);
     let mut files = args.files()?;
+    if let Some(p) = plot {
+        // Fail now rather than after a long replay.
+        std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
+        files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
+    }
     let progress = std::io::stderr().is_terminal();
     let started = std::time::Instant::now();
     let mut first_ts = None;
@@ -530,6 +545,12 @@ fn replay(file: &std::path::Path, args: &RunArgs, speed: Option<f64>) -> anyhow:
     }
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
+    }
+    if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
+        let title = format!("ahcmon replay {}", file.display());
+        std::fs::write(p, rec.render(&title))
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        eprintln!("plot written to {}", p.display());
     }
     print!(
         "{}",

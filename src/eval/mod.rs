@@ -28,7 +28,7 @@ pub struct Trace {
 }
 
 impl Trace {
-    fn push(&mut self, t: f64, g: f64, gb: (f64, f64), d: f64, db: (f64, f64)) {
+    pub fn push(&mut self, t: f64, g: f64, gb: (f64, f64), d: f64, db: (f64, f64)) {
         self.t.push(t);
         self.gamma.push(g);
         self.gamma_lo.push(gb.0);

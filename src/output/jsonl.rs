@@ -215,6 +215,8 @@ pub struct MonitorFiles {
     pub error: Option<std::io::Error>,
     /// All decisions seen (for summaries and tests).
     pub seen: Vec<Decision>,
+    /// Traces for `--plot`.
+    pub plot: Option<crate::output::svg::PlotRecorder>,
 }
 
 impl MonitorFiles {
@@ -231,6 +233,7 @@ impl MonitorFiles {
             echo: true,
             error: None,
             seen: vec![],
+            plot: None,
         })
     }
 
@@ -280,6 +283,9 @@ impl MonitorFiles {
             let r = w.write(d);
             self.keep(r);
         }
+        if let Some(p) = self.plot.as_mut() {
+            p.mark(d);
+        }
         self.seen.push(d.clone());
     }
 }
@@ -294,6 +300,9 @@ impl crate::pipeline::PipelineSink for MonitorFiles {
     }
 
     fn estimates(&mut self, t: f64, sysid: u8, est: &[&[AhcEstimate]; 2], profile: &Profile) {
+        if let Some(p) = self.plot.as_mut() {
+            p.record(t, sysid, est, profile);
+        }
         let k = self.steps.entry(sysid).or_insert(0);
         *k += 1;
         if (*k - 1) % self.decimate != 0 {

@@ -159,3 +159,225 @@ pub fn render(run: &Run) -> String {
     out.push_str("</svg>\n");
     out
 }
+
+/// Keeps a bounded trace per vehicle, actuator and filter for `replay --plot`: when a trace
+/// reaches its cap every other point is dropped and the stride doubles, so memory stays flat
+/// in the length of the log.
+#[derive(Debug, Default)]
+pub struct PlotRecorder {
+    /// (sysid, actuator name, channel) → [MIT-UKF, MIT-ESMF] traces.
+    pub traces: Vec<((u8, String, u8), [Trace; 2])>,
+    steps: std::collections::BTreeMap<u8, u64>,
+    stride: std::collections::BTreeMap<u8, u64>,
+    /// Decisions to mark: (sysid, t, actuator, label).
+    pub marks: Vec<(u8, f64, Option<String>, String)>,
+}
+
+const PLOT_POINTS: usize = 4000;
+
+fn halve(v: &mut Vec<f64>) {
+    let mut k = 0;
+    v.retain(|_| {
+        k += 1;
+        k % 2 == 1
+    });
+}
+
+impl PlotRecorder {
+    pub fn record(
+        &mut self,
+        t: f64,
+        sysid: u8,
+        est: &[&[crate::estimate::vehicle::AhcEstimate]; 2],
+        profile: &crate::telemetry::Profile,
+    ) {
+        let step = self.steps.entry(sysid).or_insert(0);
+        let stride = self.stride.entry(sysid).or_insert(1);
+        *step += 1;
+        if (*step - 1) % *stride != 0 {
+            return;
+        }
+        let mut full = false;
+        for (j, a) in profile.actuators.iter().enumerate() {
+            let key = (sysid, a.name.clone(), a.channel);
+            let idx = match self.traces.iter().position(|(k, _)| *k == key) {
+                Some(i) => i,
+                None => {
+                    self.traces.push((key, Default::default()));
+                    self.traces.len() - 1
+                }
+            };
+            for (f, tr) in self.traces[idx].1.iter_mut().enumerate() {
+                let e = est[f][j];
+                tr.push(t, e.gamma, (e.gamma_lo, e.gamma_hi), e.delta, (e.delta_lo, e.delta_hi));
+                full |= tr.t.len() >= PLOT_POINTS;
+            }
+        }
+        if full {
+            *stride *= 2;
+            for (k, traces) in self.traces.iter_mut() {
+                if k.0 != sysid {
+                    continue;
+                }
+                for tr in traces.iter_mut() {
+                    for v in [
+                        &mut tr.t,
+                        &mut tr.gamma,
+                        &mut tr.gamma_lo,
+                        &mut tr.gamma_hi,
+                        &mut tr.delta,
+                        &mut tr.delta_lo,
+                        &mut tr.delta_hi,
+                    ] {
+                        halve(v);
+                    }
+                }
+            }
+        }
+    }
+
+    pub fn mark(&mut self, d: &crate::diagnose::vehicle::Decision) {
+        if matches!(
+            d.event,
+            crate::diagnose::vehicle::Event::ExcitationLow
+        ) {
+            return;
+        }
+        let label = match d.class {
+            Some(c) => format!("{} {}", d.event.as_str(), c.as_str()),
+            None => d.event.as_str().to_string(),
+        };
+        self.marks.push((d.sysid, d.t, d.actuator.clone(), label));
+    }
+
+    /// One SVG: for every actuator a gamma panel and a delta panel with both filters'
+    /// estimates and bounds; decisions as vertical lines on their actuator's panels (link
+    /// events on all).
+    pub fn render(&self, title: &str) -> String {
+        let n = self.traces.len().max(1);
+        let panel_h = 150.0;
+        let height = TOP + 2.0 * n as f64 * (panel_h + 40.0);
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            r#"<?xml version="1.0" encoding="UTF-8"?>
+<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{height}" viewBox="0 0 {W} {height}" font-family="sans-serif" font-size="12">
+<rect width="100%" height="100%" fill="white"/>
+<text x="{LEFT}" y="22" font-size="15">{title}</text>"#
+        );
+        if self.traces.is_empty() {
+            let _ = writeln!(out, r#"<text x="{LEFT}" y="60">no estimates (no flight found)</text>"#);
+        }
+        let t0 = self
+            .traces
+            .iter()
+            .filter_map(|(_, tr)| tr[0].t.first().copied())
+            .fold(f64::INFINITY, f64::min);
+        let t1 = self
+            .traces
+            .iter()
+            .filter_map(|(_, tr)| tr[0].t.last().copied())
+            .fold(f64::NEG_INFINITY, f64::max);
+        let span_t = (t1 - t0).max(1e-3);
+        let names = ["MIT-UKF", "MIT-ESMF"];
+        let mut panel = 0;
+        for ((sysid, name, channel), traces) in &self.traces {
+            for (which, healthy) in [("gamma", 1.0), ("delta", 0.0)] {
+                let y0 = TOP + panel as f64 * (panel_h + 40.0);
+                panel += 1;
+                let pick = |tr: &'_ Trace| -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+                    if which == "gamma" {
+                        (tr.gamma.clone(), tr.gamma_lo.clone(), tr.gamma_hi.clone())
+                    } else {
+                        (tr.delta.clone(), tr.delta_lo.clone(), tr.delta_hi.clone())
+                    }
+                };
+                // Scale on the estimates (bounds may be much wider; they are clipped).
+                let (lo, hi) = finite_range(
+                    traces
+                        .iter()
+                        .flat_map(|tr| pick(tr).0)
+                        .chain(std::iter::once(healthy)),
+                );
+                let pad = 0.25 * (hi - lo);
+                let (lo, hi) = (lo - pad, hi + pad);
+                let plot_w = W - LEFT - RIGHT;
+                let map = move |t: f64, v: f64| {
+                    let x = LEFT + (t - t0) / span_t * plot_w;
+                    let y = y0 + panel_h - (v.clamp(lo, hi) - lo) / (hi - lo) * panel_h;
+                    (x, y)
+                };
+                let _ = writeln!(
+                    out,
+                    r##"<rect x="{LEFT}" y="{y0}" width="{plot_w}" height="{panel_h}" fill="none" stroke="#888"/>
+<text x="{LEFT}" y="{}">sysid {sysid} · {name} (ch {channel}) · {which}</text>"##,
+                    y0 - 6.0
+                );
+                for k in 0..=2 {
+                    let v = lo + (hi - lo) * k as f64 / 2.0;
+                    let (_, y) = map(t0, v);
+                    let _ = writeln!(
+                        out,
+                        r##"<text x="{}" y="{:.1}" text-anchor="end">{v:.2}</text>"##,
+                        LEFT - 4.0,
+                        y + 4.0
+                    );
+                }
+                let (_, yh) = map(t0, healthy);
+                let _ = writeln!(
+                    out,
+                    r##"<line x1="{LEFT}" x2="{}" y1="{yh:.1}" y2="{yh:.1}" stroke="#aaa" stroke-dasharray="2 2"/>"##,
+                    LEFT + plot_w
+                );
+                for k in 0..=8 {
+                    let t = t0 + span_t * k as f64 / 8.0;
+                    let (x, _) = map(t, lo);
+                    let _ = writeln!(
+                        out,
+                        r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle">{t:.0} s</text>"#,
+                        y0 + panel_h + 14.0
+                    );
+                }
+                for (f, tr) in traces.iter().enumerate() {
+                    let c = COLORS[f];
+                    let (est, blo, bhi) = pick(tr);
+                    let bound = format!(
+                        r#"stroke="{c}" stroke-width="0.8" stroke-dasharray="4 3" opacity="0.6""#
+                    );
+                    polyline(&mut out, &tr.t, &blo, &map, &bound);
+                    polyline(&mut out, &tr.t, &bhi, &map, &bound);
+                    polyline(&mut out, &tr.t, &est, &map, &format!(r#"stroke="{c}" stroke-width="1.4""#));
+                }
+                for (s, t, act, label) in &self.marks {
+                    if s != sysid || act.as_deref().is_some_and(|a| a != name) {
+                        continue;
+                    }
+                    let (x, _) = map(*t, lo);
+                    let _ = writeln!(
+                        out,
+                        r##"<line x1="{x:.1}" x2="{x:.1}" y1="{y0}" y2="{}" stroke="#d62728" stroke-width="1"/><text x="{:.1}" y="{}" fill="#d62728" font-size="10">{label}</text>"##,
+                        y0 + panel_h,
+                        x + 2.0,
+                        y0 + 10.0
+                    );
+                }
+                let lx = LEFT + plot_w + 12.0;
+                for (f, n) in names.iter().enumerate() {
+                    let _ = writeln!(
+                        out,
+                        r#"<text x="{lx}" y="{}" fill="{}">{n}</text>"#,
+                        y0 + 16.0 + 16.0 * f as f64,
+                        COLORS[f]
+                    );
+                }
+                let _ = writeln!(
+                    out,
+                    r##"<text x="{lx}" y="{}" fill="#666">dashed: bounds</text>"##,
+                    y0 + 52.0
+                );
+            }
+        }
+        out.push_str("</svg>\n");
+        out
+    }
+}
