@@ -106,6 +106,22 @@ enum Command {
         #[arg(long, value_name = "S")]
         exit_idle: Option<f64>,
     },
+    /// Identify a vehicle's model (D, G, c and the noise levels) from a healthy stretch of a
+    /// telemetry log and write it as a profile (usable with --profile FILE).
+    Calibrate {
+        /// The .tlog file.
+        file: PathBuf,
+        /// End of the healthy stretch (vehicle time, s since boot, as in the decisions' `t`);
+        /// it starts when the vehicle is airborne and settled.
+        #[arg(long, value_name = "T")]
+        until: f64,
+        /// The profile file to write.
+        #[arg(short = 'o', long = "output", value_name = "PROFILE.toml")]
+        output: PathBuf,
+        /// Start from this profile's geometry instead of the detected one.
+        #[arg(long, value_name = "NAME|FILE")]
+        profile: Option<String>,
+    },
     /// Replay a telemetry log (.tlog from any ground station) through both filters and the
     /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
     /// decisions, and counts of everything dropped).
@@ -279,6 +295,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             link_timeout,
             exit_idle,
         } => monitor(&conn, &run, link_timeout, exit_idle),
+        Command::Calibrate {
+            file,
+            until,
+            output,
+            profile,
+        } => calibrate(&file, until, &output, profile.as_deref()),
         Command::Replay {
             file,
             run,
@@ -480,6 +502,79 @@ fn monitor(
             counters.backpressure_drops
         );
     }
+    Ok(())
+}
+
+fn calibrate(
+    file: &std::path::Path,
+    until: f64,
+    output: &std::path::Path,
+    profile: Option<&str>,
+) -> anyhow::Result<()> {
+    let until = positive("--until", until)?;
+    let input_error = |source| InputFileError {
+        path: file.display().to_string(),
+        source,
+    };
+    let mut reader = TlogReader::open(file).map_err(input_error)?;
+    let args = RunArgs {
+        profile: profile.map(str::to_string),
+        decisions: None,
+        estimates: None,
+        decimate: 1,
+        calibrate_until: Some(until),
+    };
+    let mut monitor = Monitor::new(args.pipeline_config()?);
+    let mut files = MonitorFiles::new(None, None, 1)?;
+    files.echo = false;
+    let mut found = None;
+    while let Some((_, frame)) = reader.next_frame().map_err(input_error)? {
+        monitor.on_frame(&frame, &mut files);
+        if let Some((sysid, p)) = monitor
+            .pipelines
+            .iter()
+            .find(|(_, p)| p.fit.is_some())
+        {
+            found = Some((*sysid, p.profile().cloned(), p.fit.clone()));
+            break;
+        }
+    }
+    let Some((sysid, Some(mut calibrated), Some(fit))) = found else {
+        return Err(UsageError(format!(
+            "{}: no airborne stretch of a vehicle ended before t = {until} s (vehicle time); nothing to calibrate",
+            file.display()
+        ))
+        .into());
+    };
+    let base = calibrated.name.clone();
+    calibrated.name = format!("{base}-calibrated");
+    let axes = ["roll", "pitch", "yaw", "a_z"];
+    let quality: Vec<String> = fit
+        .quality
+        .r_squared
+        .iter()
+        .zip(&fit.scaled)
+        .enumerate()
+        .map(|(i, (r2, scaled))| {
+            format!(
+                "{} {} R2 {:.2}",
+                axes[i],
+                if *scaled { "fitted" } else { "offset only" },
+                r2
+            )
+        })
+        .collect();
+    calibrated.description = format!(
+        "{base} identified from {} (sysid {sysid}), healthy stretch of {} samples ending at t = {until} s: {}",
+        file.display(),
+        fit.quality.samples,
+        quality.join(", ")
+    );
+    let text = toml::to_string(&calibrated).context("cannot serialise the profile")?;
+    std::fs::write(output, format!("# written by `ahcmon calibrate`\n{text}"))
+        .with_context(|| format!("cannot write {}", output.display()))?;
+    println!("{}", calibrated.description);
+    println!("profile written to {}", output.display());
     Ok(())
 }
 

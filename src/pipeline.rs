@@ -389,7 +389,7 @@ impl VehiclePipeline {
             }
         };
         let mut calibrated = profile.with_rate_params(&fit.params);
-        calibrated.rate_hz = 1.0 / dt;
+        calibrated.rate_hz = (1e3 / dt).round() / 1e3;
         // Process noise from what the model could not explain on the healthy stretch, but
         // never below the profile's: a calm stretch (a still hover) would otherwise make the
         // filters trust the model more than any manoeuvre or fault transient deserves.

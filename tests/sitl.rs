@@ -137,3 +137,46 @@ fn quad_plus_hover_motor1_gain_fault() {
         && d.t > off
         && d.actuator.as_deref() == Some("motor1")));
 }
+
+#[test]
+fn calibrate_writes_a_profile_that_replay_uses() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sitl_calibrate");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("quadx.toml");
+    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("replay/tlogs/sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .arg("calibrate")
+        .arg(&log)
+        .args(["--until", "90", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let p = Profile::resolve(out.to_str().unwrap()).unwrap();
+    assert_eq!(p.name, "quad-x-calibrated");
+    // The identified X pattern: motor 1 (front right) rolls left and pitches up.
+    let g = p.actuators[0].effectiveness.unwrap();
+    assert!(g[0] < 0.0 && g[1] > 0.0, "{g:?}");
+    // Re-running on the calibrated profile needs (almost) no rescaling.
+    let c = replay(
+        "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+        Some(out.to_str().unwrap()),
+    );
+    assert!(c
+        .decisions
+        .iter()
+        .filter(|d| is_fault(d))
+        .all(|d| d.actuator.as_deref() == Some("motor4") && d.t >= 98.604));
+    // Past the end of the log: a clear error, exit 2.
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .arg("calibrate")
+        .arg(&log)
+        .args(["--until", "100000", "-o"])
+        .arg(dir.join("never.toml"))
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("nothing to calibrate"));
+}
