@@ -530,11 +530,7 @@ fn calibrate(
     let mut found = None;
     while let Some((_, frame)) = reader.next_frame().map_err(input_error)? {
         monitor.on_frame(&frame, &mut files);
-        if let Some((sysid, p)) = monitor
-            .pipelines
-            .iter()
-            .find(|(_, p)| p.fit.is_some())
-        {
+        if let Some((sysid, p)) = monitor.pipelines.iter().find(|(_, p)| p.fit.is_some()) {
             found = Some((*sysid, p.profile().cloned(), p.fit.clone()));
             break;
         }

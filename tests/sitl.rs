@@ -144,8 +144,9 @@ fn calibrate_writes_a_profile_that_replay_uses() {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("quadx.toml");
-    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("replay/tlogs/sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog");
+    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(
+        "replay/tlogs/sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+    );
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
         .arg("calibrate")
         .arg(&log)
@@ -153,7 +154,11 @@ fn calibrate_writes_a_profile_that_replay_uses() {
         .arg(&out)
         .output()
         .unwrap();
-    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let p = Profile::resolve(out.to_str().unwrap()).unwrap();
     assert_eq!(p.name, "quad-x-calibrated");
     // The identified X pattern: motor 1 (front right) rolls left and pitches up.
@@ -164,11 +169,12 @@ fn calibrate_writes_a_profile_that_replay_uses() {
         "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
         Some(out.to_str().unwrap()),
     );
-    assert!(c
-        .decisions
-        .iter()
-        .filter(|d| is_fault(d))
-        .all(|d| d.actuator.as_deref() == Some("motor4") && d.t >= 98.604));
+    assert!(
+        c.decisions
+            .iter()
+            .filter(|d| is_fault(d))
+            .all(|d| d.actuator.as_deref() == Some("motor4") && d.t >= 98.604)
+    );
     // Past the end of the log: a clear error, exit 2.
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
         .arg("calibrate")

@@ -218,6 +218,12 @@ pub struct Esmf<Mo, const N: usize, const M: usize> {
     pub resets: u64,
     /// Measurement matrix of the last step.
     pub h: SMatrix<f64, M, N>,
+    /// A priori box per coordinate (centre, half-width; infinite = none): the set is
+    /// intersected with it whenever its projection is wider (see `intersect_box`).
+    pub box_centre: SVector<f64, N>,
+    pub box_half: SVector<f64, N>,
+    /// Box intersections done over the filter's life.
+    pub box_cuts: u64,
 }
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
@@ -248,6 +254,58 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             inconsistent_run: 0,
             inconsistent_steps: 0,
             resets: 0,
+            box_centre: SVector::zeros(),
+            box_half: SVector::repeat(f64::INFINITY),
+            box_cuts: 0,
+        }
+    }
+
+    /// Intersect the set with the slabs `|z_i - c_i| <= r_i` wherever its projection on `i` is
+    /// wider than the slab. Each cut is the set update with the scalar pseudo-measurement
+    /// `c_i` of `z_i` bounded by `r_i` (the same outer ellipsoid as a measurement update, with
+    /// the weight that makes `P_ii` smallest), so a truth inside both stays inside. It keeps
+    /// directions the data do not see (gain against bias in a steady hover) from growing
+    /// without end under the Minkowski prediction.
+    pub fn intersect_box(&mut self) {
+        for i in 0..N {
+            let r = self.box_half[i];
+            let pii = self.p[(i, i)];
+            if !(r.is_finite() && pii > r * r) {
+                continue;
+            }
+            let e = self.box_centre[i] - self.x[i];
+            // Choose rho on a grid: the smallest trace of the result (the weight also inflates
+            // every other direction by 1/(1-rho), so P_ii alone is the wrong measure).
+            let trace = self.p.trace();
+            let col_sq = self.p.column(i).norm_squared();
+            let mut best: Option<(f64, f64)> = None;
+            for k in 1..40 {
+                let rho = k as f64 / 40.0;
+                let a = pii / (1.0 - rho);
+                let b = r * r / rho;
+                let delta = 1.0 - e * e / (a + b);
+                if delta <= 0.0 {
+                    continue;
+                }
+                let w = a + b;
+                let size = delta * (trace / (1.0 - rho) - col_sq / ((1.0 - rho) * (1.0 - rho) * w));
+                if best.is_none_or(|(_, s)| size < s) {
+                    best = Some((rho, size));
+                }
+            }
+            let Some((rho, _)) = best else { continue };
+            let pp = self.p / (1.0 - rho);
+            let w = pp[(i, i)] + r * r / rho;
+            let col = pp.column(i).into_owned();
+            let gain = col / w;
+            let delta = 1.0 - e * e / w;
+            let mut p = (pp - gain * col.transpose()) * delta;
+            symmetrize(&mut p);
+            if p.iter().all(|v| v.is_finite()) && p[(i, i)] > 0.0 {
+                self.x += gain * e;
+                self.p = p;
+                self.box_cuts += 1;
+            }
         }
     }
 
@@ -316,6 +374,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             outcome.reset = true;
         }
         self.p = p;
+        self.intersect_box();
         self.last = st;
         self.last_a = a;
         self.h = h;

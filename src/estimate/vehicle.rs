@@ -86,6 +86,10 @@ pub struct FilterSetup<const N: usize, const M: usize> {
     pub set_r: SMatrix<f64, M, M>,
     /// Process-noise entries the MIT rules leave alone (the deltas of range outputs).
     pub fixed: [bool; N],
+    /// The a priori box of the set filter: gamma within 1 +- 2 (from reversed to triple
+    /// effect), delta within the command range (+-1 for a range output, +-2 about trim).
+    pub box_centre: SVector<f64, N>,
+    pub box_half: SVector<f64, N>,
 }
 
 impl<const N: usize, const M: usize> FilterSetup<N, M> {
@@ -121,6 +125,17 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
         for j in 0..l {
             fixed[3 + l + j] = profile.actuators[j].role.is_range();
         }
+        let mut box_centre = SVector::<f64, N>::zeros();
+        let mut box_half = SVector::<f64, N>::repeat(f64::INFINITY);
+        for j in 0..l {
+            box_centre[3 + j] = 1.0;
+            box_half[3 + j] = 2.0;
+            box_half[3 + l + j] = if profile.actuators[j].role.is_range() {
+                1.0
+            } else {
+                2.0
+            };
+        }
         let mut std_r = SVector::<f64, M>::zeros();
         for i in 0..3 {
             std_r[i] = noise.gyro;
@@ -139,6 +154,8 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             set_q: std_q.component_mul(&std_q) * 9.0 * n,
             set_r: SMatrix::from_diagonal(&(std_r.component_mul(&std_r) * 9.0 * m)),
             fixed,
+            box_centre,
+            box_half,
             model,
         })
     }
@@ -191,6 +208,8 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             s.set_r,
         );
         f.fixed = s.fixed;
+        f.esmf.box_centre = s.box_centre;
+        f.esmf.box_half = s.box_half;
         f
     }
 }

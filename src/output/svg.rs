@@ -209,7 +209,13 @@ impl PlotRecorder {
             };
             for (f, tr) in self.traces[idx].1.iter_mut().enumerate() {
                 let e = est[f][j];
-                tr.push(t, e.gamma, (e.gamma_lo, e.gamma_hi), e.delta, (e.delta_lo, e.delta_hi));
+                tr.push(
+                    t,
+                    e.gamma,
+                    (e.gamma_lo, e.gamma_hi),
+                    e.delta,
+                    (e.delta_lo, e.delta_hi),
+                );
                 full |= tr.t.len() >= PLOT_POINTS;
             }
         }
@@ -237,10 +243,7 @@ impl PlotRecorder {
     }
 
     pub fn mark(&mut self, d: &crate::diagnose::vehicle::Decision) {
-        if matches!(
-            d.event,
-            crate::diagnose::vehicle::Event::ExcitationLow
-        ) {
+        if matches!(d.event, crate::diagnose::vehicle::Event::ExcitationLow) {
             return;
         }
         let label = match d.class {
@@ -266,7 +269,10 @@ impl PlotRecorder {
 <text x="{LEFT}" y="22" font-size="15">{title}</text>"#
         );
         if self.traces.is_empty() {
-            let _ = writeln!(out, r#"<text x="{LEFT}" y="60">no estimates (no flight found)</text>"#);
+            let _ = writeln!(
+                out,
+                r#"<text x="{LEFT}" y="60">no estimates (no flight found)</text>"#
+            );
         }
         let t0 = self
             .traces
@@ -346,7 +352,13 @@ impl PlotRecorder {
                     );
                     polyline(&mut out, &tr.t, &blo, &map, &bound);
                     polyline(&mut out, &tr.t, &bhi, &map, &bound);
-                    polyline(&mut out, &tr.t, &est, &map, &format!(r#"stroke="{c}" stroke-width="1.4""#));
+                    polyline(
+                        &mut out,
+                        &tr.t,
+                        &est,
+                        &map,
+                        &format!(r#"stroke="{c}" stroke-width="1.4""#),
+                    );
                 }
                 for (s, t, act, label) in &self.marks {
                     if s != sysid || act.as_deref().is_some_and(|a| a != name) {
