@@ -133,6 +133,15 @@ fn quad_plus_hover_motor1_gain_fault() {
         .collect();
     let worst = e.iter().map(|v| (v - 0.7 * u).abs()).fold(0.0, f64::max);
     assert!(worst <= 0.05, "effective output off by {worst:.3}");
+    // And its MIT-UKF gamma within 0.1 of 0.7 while the fault is on (after 5 s). In a still
+    // hover the split into gain and bias comes from the prior (a motor's bias is rare).
+    let worst = c
+        .ukf
+        .iter()
+        .filter(|(t, _)| *t >= on + 5.0 && *t < off)
+        .map(|(_, e)| (e[0].0 - 0.7).abs())
+        .fold(0.0, f64::max);
+    assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     assert!(c.decisions.iter().any(|d| d.event == Event::Cleared
         && d.t > off
         && d.actuator.as_deref() == Some("motor1")));

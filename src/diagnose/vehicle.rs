@@ -207,7 +207,14 @@ struct ActuatorState {
     excitation_reported: bool,
     low_for: f64,
     delta_hist: Vec<(f64, f64)>,
+    /// A class different from the one in force, and since when it has been seen: a change
+    /// of class is reported only once it has held for `CLASS_HOLD_S`.
+    class_candidate: Option<(FaultClass, f64)>,
 }
+
+/// How long a new class must hold before a `changed` decision reports it (no chatter while
+/// gain and bias settle, e.g. right after a fault is removed).
+const CLASS_HOLD_S: f64 = 1.0;
 
 /// Per-vehicle diagnosis over both filters.
 pub struct Diagnoser {
@@ -430,12 +437,29 @@ impl Diagnoser {
                     st.active_filters = filters;
                 }
                 (Some(prev), c) => {
-                    // A class once found stays until the excitation allows another.
-                    let c = if c == FaultClass::Unclassified {
+                    // A class once found stays until the excitation allows another, and a new
+                    // one must hold for a while.
+                    let mut c = if c == FaultClass::Unclassified {
                         prev
                     } else {
                         c
                     };
+                    if c != prev {
+                        let st = &mut self.actuators[j];
+                        let since = match st.class_candidate {
+                            Some((cand, since)) if cand == c => since,
+                            _ => {
+                                st.class_candidate = Some((c, t));
+                                t
+                            }
+                        };
+                        if t - since < CLASS_HOLD_S {
+                            c = prev;
+                        }
+                    } else {
+                        self.actuators[j].class_candidate = None;
+                    }
+                    let st = &self.actuators[j];
                     let mut union = st.active_filters.clone();
                     for f in &filters {
                         if !union.contains(f) {

@@ -70,8 +70,8 @@ pub trait VehicleFilters: Send {
 
 /// Delta of range outputs (motors, throttle): random-walk std and prior std, as fractions of
 /// the profile's (see `FilterSetup::from_profile`).
-const RANGE_DELTA_Q_SCALE: f64 = 0.1;
-const RANGE_DELTA_P0_SCALE: f64 = 0.2;
+const RANGE_DELTA_Q_SCALE: f64 = 0.05;
+const RANGE_DELTA_P0_SCALE: f64 = 0.1;
 
 /// The filter set-up a profile implies.
 #[derive(Debug, Clone)]
@@ -107,8 +107,8 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
         }
         for j in 0..l {
             // A motor or throttle (range output, normalised from its PWM minimum) that loses
-            // thrust loses gain; an offset there is rare. Giving its delta a tenth of the
-            // random walk and a fifth of the prior spread makes a hover, where only the
+            // thrust loses gain; an offset there is rare. Giving its delta a twentieth of the
+            // random walk and a tenth of the prior spread makes a hover, where only the
             // effective output is identifiable, attribute a change to gamma.
             let range = profile.actuators[j].role.is_range();
             let (q_scale, p0_scale) = if range {
