@@ -105,6 +105,33 @@ enum Command {
         /// end of a simulated flight).
         #[arg(long, value_name = "S")]
         exit_idle: Option<f64>,
+        /// Send alerts to a mission planner on this connection (usually
+        /// udpout:127.0.0.1:14551 into a MAVProxy master): HEARTBEAT, STATUSTEXT per decision,
+        /// NAMED_VALUE_FLOAT g_/d_<actuator> at 2 Hz and AHC_ESTIMATE.
+        #[arg(long, value_name = "CONN")]
+        alerts: Option<String>,
+    },
+    /// The built-in demonstration: a simulated H3-120 helicopter flies in this process over
+    /// loopback UDP to the monitor; at 32 s swash servo 2 loses 40 % effectiveness, at 45 s the
+    /// tail servo gets a bias; it ends by itself after 58 s.
+    Demo {
+        /// Print the decisions instead of the dashboard (the dashboard is not built yet, so the
+        /// demo is headless for now).
+        #[arg(long)]
+        headless: bool,
+        /// Another vehicle scenario instead of the built-in one (heli-demo).
+        #[arg(long, value_name = "FILE|NAME")]
+        scenario: Option<String>,
+        #[arg(long, value_name = "FILE")]
+        decisions: Option<PathBuf>,
+        #[arg(long, value_name = "FILE")]
+        estimates: Option<PathBuf>,
+        /// Also send the alerts to a planner (see `monitor --alerts`).
+        #[arg(long, value_name = "CONN")]
+        alerts: Option<String>,
+        /// Multiple of real time (e.g. 4 for a quick look).
+        #[arg(long, default_value_t = 1.0, value_name = "X")]
+        speed: f64,
     },
     /// Identify a vehicle's model (D, G, c and the noise levels) from a healthy stretch of a
     /// telemetry log and write it as a profile (usable with --profile FILE).
@@ -294,7 +321,51 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             headless: _,
             link_timeout,
             exit_idle,
-        } => monitor(&conn, &run, link_timeout, exit_idle),
+            alerts,
+        } => monitor(
+            &conn,
+            &run,
+            link_timeout,
+            exit_idle,
+            alerts.as_deref(),
+            None,
+        ),
+        Command::Demo {
+            headless: _,
+            scenario: name,
+            decisions,
+            estimates,
+            alerts,
+            speed,
+        } => {
+            let named = scenario::resolve(name.as_deref().unwrap_or("heli-demo"))?;
+            if named.scenario.is_paper() {
+                return Err(UsageError(format!(
+                    "{} is a paper scenario; the demo needs a vehicle scenario",
+                    named.name
+                ))
+                .into());
+            }
+            let speed = positive("--speed", speed)?;
+            eprintln!("demo: {}", named.scenario.description);
+            let args = RunArgs {
+                profile: None,
+                decisions,
+                estimates,
+                decimate: 1,
+                calibrate_until: None,
+            };
+            // The monitor stops once the simulated flight has ended.
+            let idle = (1.5 / speed).max(0.5);
+            monitor(
+                "udpin:127.0.0.1:0",
+                &args,
+                2.0,
+                Some(idle),
+                alerts.as_deref(),
+                Some(DemoVehicle { named, speed }),
+            )
+        }
         Command::Calibrate {
             file,
             until,
@@ -338,9 +409,8 @@ fn positive(name: &str, v: f64) -> anyhow::Result<f64> {
 
 /// The simulated vehicle as a MAVLink autopilot: to a live connection and/or a tlog.
 fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
-    use ahcmon::output::jsonl::{JsonlWriter, NoiseInForce, TruthRecord};
-    use ahcmon::sim::vehicle::VehicleSim;
-    use ahcmon::telemetry::encode::SimTelemetry;
+    use ahcmon::link::simulate::{FlyOptions, fly};
+    use ahcmon::output::jsonl::JsonlWriter;
     if named.scenario.is_paper() {
         return Err(UsageError(format!(
             "{} is a paper scenario; MAVLink output needs a vehicle scenario",
@@ -350,11 +420,6 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
     }
     let speed = o.speed.map(|x| positive("--speed", x)).transpose()?;
     let spec: Option<ConnSpec> = o.out.as_deref().map(str::parse).transpose()?;
-    let (cfg, _) = sim_config(named, o.seed)?;
-    let vehicle = cfg.profile.clone();
-    let (gyro, az_noise) = (cfg.gyro_noise, cfg.az_noise);
-    let mut sim = VehicleSim::new(cfg).map_err(|e| anyhow::anyhow!(e))?;
-    let mut enc = SimTelemetry::new(&vehicle);
     let mut tlog = o
         .tlog
         .as_deref()
@@ -365,99 +430,50 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         .as_deref()
         .map(|p| JsonlWriter::create(p).with_context(|| format!("cannot create {}", p.display())))
         .transpose()?;
-    let steps = named.scenario.steps();
-    let pace = if spec.is_some() {
-        Some(speed.unwrap_or(1.0))
-    } else {
-        speed
-    };
     // tlog time: now when live, a fixed epoch otherwise (reproducible files).
-    let epoch_us = if spec.is_some() {
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_micros() as u64)
-    } else {
-        1_767_225_600_000_000 // 2026-01-01T00:00:00Z
+    let live = spec.is_some();
+    let opts = FlyOptions {
+        sysid: o.sysid,
+        seed: o.seed,
+        speed: if live {
+            Some(speed.unwrap_or(1.0))
+        } else {
+            speed
+        },
+        epoch_us: if live {
+            now_us()
+        } else {
+            1_767_225_600_000_000
+        },
     };
     let rt = runtime()?;
-    let mut counts: std::collections::BTreeMap<&'static str, u64> = Default::default();
-    let (sent, unsent) = rt.block_on(async {
+    let report = rt.block_on(async {
         let mut link = match &spec {
             Some(s) => Some(Link::open(s.clone()).await?),
             None => None,
         };
-        let started = tokio::time::Instant::now();
-        let mut msgs = Vec::with_capacity(64);
-        let mut frame = Vec::with_capacity(300);
-        let mut seq = 0u8;
-        let (mut sent, mut unsent) = (0u64, 0u64);
-        let mut prev = sim.step();
-        for _ in 1..steps {
-            let next = sim.step();
-            msgs.clear();
-            // Rates of this instant with the outputs commanded now (they act until the next).
-            enc.messages(
-                prev.t,
-                [prev.y[0], prev.y[1], prev.y[2]],
-                prev.attitude,
-                if vehicle.model.measure_az {
-                    prev.y[3]
-                } else {
-                    -9.80665
-                },
-                &next.u[..vehicle.actuators.len()],
-                &mut msgs,
-            );
-            if let Some(x) = pace {
-                let due = started + std::time::Duration::from_secs_f64(prev.t / x);
-                tokio::time::sleep_until(due).await;
-            }
-            let ts = epoch_us + (prev.t * 1e6) as u64;
-            for m in &msgs {
-                ahcmon::link::frame::encode_v2(o.sysid, 1, seq, m, &mut frame);
-                seq = seq.wrapping_add(1);
-                *counts
-                    .entry(mavlink_core::Message::message_name(m))
-                    .or_insert(0) += 1;
-                if let Some(w) = tlog.as_mut() {
-                    w.write_raw(ts, &frame)?;
-                }
-                if let Some(l) = link.as_mut() {
-                    if l.send(&frame).await? {
-                        sent += 1;
-                    } else {
-                        unsent += 1;
-                    }
-                }
-            }
-            if let Some(w) = truth.as_mut() {
-                let noise = NoiseInForce { gyro, az: az_noise };
-                let mut rec = TruthRecord::new(&prev, &vehicle, noise);
-                rec.t = prev.t + ahcmon::telemetry::encode::BOOT_OFFSET_S;
-                w.write(&rec)?;
-            }
-            prev = next;
-        }
-        anyhow::Ok((sent, unsent))
+        anyhow::Ok(fly(named, &opts, link.as_mut(), tlog.as_mut(), truth.as_mut()).await?)
     })?;
-    if let Some(w) = tlog.as_mut() {
-        w.flush()?;
-    }
-    let list: Vec<String> = counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    let list: Vec<String> = report
+        .counts
+        .iter()
+        .map(|(k, v)| format!("{k} {v}"))
+        .collect();
     println!(
         "{}: {} s of {} as sysid {} (seed {}): {}",
         named.name,
         named.scenario.duration_s,
-        vehicle.name,
+        report.vehicle,
         o.sysid,
         o.seed,
         list.join(", ")
     );
     if let Some(s) = &spec {
         println!(
-            "sent {sent} frames to {s}{}",
-            if unsent > 0 {
-                format!(", {unsent} not sent (no peer yet)")
+            "sent {} frames to {s}{}",
+            report.sent,
+            if report.unsent > 0 {
+                format!(", {} not sent (no peer yet)", report.unsent)
             } else {
                 String::new()
             }
@@ -466,13 +482,28 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn now_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
+}
+
+/// What runs beside the monitor in the same process: `demo`'s simulated vehicle.
+struct DemoVehicle {
+    named: NamedScenario,
+    speed: f64,
+}
+
 fn monitor(
     conn: &str,
     args: &RunArgs,
     link_timeout: f64,
     exit_idle: Option<f64>,
+    alerts: Option<&str>,
+    demo: Option<DemoVehicle>,
 ) -> anyhow::Result<()> {
     let spec: ConnSpec = conn.parse()?;
+    let alerts: Option<ConnSpec> = alerts.map(str::parse).transpose()?;
     let opts = ahcmon::link::live::LiveOptions {
         link_timeout: std::time::Duration::from_secs_f64(positive("--link-timeout", link_timeout)?),
         exit_idle: exit_idle
@@ -482,15 +513,47 @@ fn monitor(
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
     let mut files = args.files()?;
+    if alerts.is_some() {
+        files.alerts = Some(ahcmon::output::alerts::Alerts::default());
+    }
     let rt = runtime()?;
     let counters = rt.block_on(async {
         let link = Link::open(spec.clone()).await?;
+        let local = link.local_addr();
         eprintln!(
             "monitor: listening on {spec}{}",
-            link.local_addr()
-                .map_or(String::new(), |a| format!(" (local {a})"))
+            local.map_or(String::new(), |a| format!(" (local {a})"))
         );
-        ahcmon::link::live::run(link, &mut monitor, &mut files, opts).await
+        let alert_link = match &alerts {
+            Some(a) => {
+                eprintln!("monitor: alerts to {a} (sysid of the vehicle, component 191)");
+                Some(Link::open(a.clone()).await?)
+            }
+            None => None,
+        };
+        // demo: the simulated vehicle flies in this process, over loopback UDP to the monitor.
+        let sim = match (demo, local) {
+            (Some(d), Some(addr)) => {
+                let target: ConnSpec = format!("udpout:127.0.0.1:{}", addr.port()).parse()?;
+                let mut out = Link::open(target).await?;
+                Some(tokio::spawn(async move {
+                    let opts = ahcmon::link::simulate::FlyOptions {
+                        sysid: 1,
+                        seed: d.named.scenario.seed,
+                        speed: Some(d.speed),
+                        epoch_us: now_us(),
+                    };
+                    ahcmon::link::simulate::fly(&d.named, &opts, Some(&mut out), None, None).await
+                }))
+            }
+            _ => None,
+        };
+        let counters =
+            ahcmon::link::live::run(link, &mut monitor, &mut files, alert_link, opts).await?;
+        if let Some(h) = sim {
+            h.await.context("the simulated vehicle stopped")??;
+        }
+        anyhow::Ok(counters)
     })?;
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
@@ -500,6 +563,12 @@ fn monitor(
         println!(
             "{} frames dropped: the estimators fell behind",
             counters.backpressure_drops
+        );
+    }
+    if let Some(a) = &files.alerts {
+        println!(
+            "alerts: {} STATUSTEXT sent, {} dropped by the rate limit",
+            a.texts_sent, a.texts_dropped
         );
     }
     Ok(())

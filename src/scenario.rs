@@ -183,6 +183,10 @@ pub const BUILTIN: &[(&str, &str)] = &[
         include_str!("../replay/scenarios/heli-swash2-loe-live.toml"),
     ),
     (
+        "heli-demo",
+        include_str!("../replay/scenarios/heli-demo.toml"),
+    ),
+    (
         "heli-tail-bias",
         include_str!("../replay/scenarios/heli-tail-bias.toml"),
     ),

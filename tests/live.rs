@@ -205,3 +205,64 @@ fn corrupted_real_log_is_counted_and_still_estimated() {
     let lines = std::fs::read_to_string(&est).unwrap().lines().count();
     assert!(lines > 8000, "only {lines} estimate lines");
 }
+
+#[test]
+fn demo_alerts_reach_a_pymavlink_listener() {
+    use std::io::{BufRead, BufReader};
+    let port = free_udp_port();
+    let py = common::python();
+    let mut listener = Command::new(&py)
+        .args([
+            "tests/reference/alerts_listener.py",
+            &port.to_string(),
+            "40",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}; run `bash .ci/run` once", py.display()));
+    let mut out = BufReader::new(listener.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    assert_eq!(line.trim(), "ready", "listener did not start");
+    let demo = Command::new(bin())
+        .args(["demo", "--headless", "--speed", "4", "--alerts"])
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .output()
+        .unwrap();
+    assert!(
+        demo.status.success(),
+        "{}",
+        String::from_utf8_lossy(&demo.stderr)
+    );
+    line.clear();
+    out.read_line(&mut line).unwrap();
+    let _ = listener.wait();
+    let seen: Value = serde_json::from_str(&line).expect("listener JSON");
+    // HEARTBEAT: MAV_TYPE_ONBOARD_CONTROLLER (18), MAV_AUTOPILOT_INVALID (8), as the vehicle's sysid.
+    assert!(
+        seen["heartbeat"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|h| h == &serde_json::json!([18, 8])),
+        "{seen}"
+    );
+    assert_eq!(seen["sysids"], serde_json::json!([1]));
+    let texts: Vec<String> = seen["statustext"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s[1].as_str().unwrap().to_string())
+        .collect();
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.starts_with("AHC swash2 ") && t.len() <= 50),
+        "{texts:?}"
+    );
+    let names = seen["named_value_float"].as_array().unwrap();
+    assert!(names.iter().any(|n| n == "g_swash2"), "{names:?}");
+    assert!(names.iter().any(|n| n == "d_tail"), "{names:?}");
+}

@@ -39,13 +39,16 @@ pub struct LiveCounters {
     pub backpressure_drops: u64,
 }
 
-/// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters.
+/// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
+/// `alerts`, the frames the sink's alert component queues are sent on that link.
 pub async fn run(
     mut link: Link,
     monitor: &mut Monitor,
-    sink: &mut dyn PipelineSink,
+    sink: &mut crate::output::jsonl::MonitorFiles,
+    mut alerts: Option<Link>,
     opts: LiveOptions,
 ) -> Result<LiveCounters, super::conn::ConnError> {
+    let clock = Instant::now();
     let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
     let (done_tx, done_rx) =
         tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
@@ -89,8 +92,10 @@ pub async fn run(
                     }
                 }
                 monitor.on_frame(&frame, sink);
+                send_alerts(sink, alerts.as_mut(), clock).await;
             }
             _ = tick.tick() => {
+                send_alerts(sink, alerts.as_mut(), clock).await;
                 let now = Instant::now();
                 for (sysid, seen) in &last_seen {
                     // Only vehicles the monitor knows (not every stray system id).
@@ -122,6 +127,22 @@ pub async fn run(
     match result {
         Ok(Ok(r)) => r,
         _ => Ok(LiveCounters::default()),
+    }
+}
+
+/// Drain the alert component's queue onto the alert link (a failed send is not fatal: the
+/// planner may not be up yet).
+async fn send_alerts(
+    sink: &mut crate::output::jsonl::MonitorFiles,
+    link: Option<&mut Link>,
+    clock: Instant,
+) {
+    let (Some(a), Some(link)) = (sink.alerts.as_mut(), link) else {
+        return;
+    };
+    a.tick(clock.elapsed().as_secs_f64());
+    for frame in a.outbox.drain(..) {
+        let _ = link.send(&frame).await;
     }
 }
 

@@ -9,6 +9,7 @@ pub mod dialects {
 
 pub mod frame;
 pub mod live;
+pub mod simulate;
 pub mod tlog;
 
 pub use dialects::ahcmon::MavMessage;

@@ -217,6 +217,8 @@ pub struct MonitorFiles {
     pub seen: Vec<Decision>,
     /// Traces for `--plot`.
     pub plot: Option<crate::output::svg::PlotRecorder>,
+    /// Planner alerts (`--alerts`): frames are queued here for the live loop to send.
+    pub alerts: Option<crate::output::alerts::Alerts>,
 }
 
 impl MonitorFiles {
@@ -234,6 +236,7 @@ impl MonitorFiles {
             error: None,
             seen: vec![],
             plot: None,
+            alerts: None,
         })
     }
 
@@ -286,6 +289,9 @@ impl MonitorFiles {
         if let Some(p) = self.plot.as_mut() {
             p.mark(d);
         }
+        if let Some(a) = self.alerts.as_mut() {
+            a.on_decision(d);
+        }
         self.seen.push(d.clone());
     }
 }
@@ -302,6 +308,9 @@ impl crate::pipeline::PipelineSink for MonitorFiles {
     fn estimates(&mut self, t: f64, sysid: u8, est: &[&[AhcEstimate]; 2], profile: &Profile) {
         if let Some(p) = self.plot.as_mut() {
             p.record(t, sysid, est, profile);
+        }
+        if let Some(a) = self.alerts.as_mut() {
+            a.on_estimates(t, sysid, est, profile);
         }
         let k = self.steps.entry(sysid).or_insert(0);
         *k += 1;

@@ -1,5 +1,6 @@
 //! Sinks: the eval table and JSON, SVG plots.
 
+pub mod alerts;
 pub mod jsonl;
 pub mod summary;
 pub mod svg;

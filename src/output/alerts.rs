@@ -1,0 +1,301 @@
+//! Alerts into a mission planner (DESIGN.md "Alerts to a mission planner", shared/mavlink.md
+//! §3): the monitor as a MAVLink component of its own — HEARTBEAT at 1 Hz
+//! (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) sent as the vehicle's system id with
+//! component id 191, a STATUSTEXT per decision (severity by class, at most 50 characters,
+//! rate-limited), NAMED_VALUE_FLOAT `g_<name>` / `d_<name>` per actuator at 2 Hz, and our
+//! AHC_ESTIMATE with both filters' bounds. Pure: encoded frames go to `outbox`; the caller
+//! sends them. It never commands the vehicle.
+
+use crate::diagnose::vehicle::{Decision, Event, FaultClass};
+use crate::estimate::vehicle::AhcEstimate;
+use crate::link::dialects::ahcmon::{
+    AHC_ESTIMATE_DATA, AhcState, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag,
+    MavSeverity, MavState, MavType, NAMED_VALUE_FLOAT_DATA, STATUSTEXT_DATA,
+};
+use crate::link::frame::encode_v2;
+use crate::telemetry::Profile;
+use std::collections::{BTreeMap, VecDeque};
+
+/// MAV_COMP_ID_ONBOARD_COMPUTER.
+pub const ALERT_COMPID: u8 = 191;
+/// At most one STATUSTEXT per vehicle this often (s); more wait in a short queue.
+const TEXT_INTERVAL_S: f64 = 1.0;
+const TEXT_QUEUE: usize = 8;
+/// NAMED_VALUE_FLOAT and AHC_ESTIMATE per actuator this often (s).
+const VALUE_INTERVAL_S: f64 = 0.5;
+
+#[derive(Debug, Clone, Copy)]
+struct Latest {
+    t: f64,
+    ukf: AhcEstimate,
+    esmf: AhcEstimate,
+    channel: u8,
+}
+
+#[derive(Debug, Default)]
+pub struct Alerts {
+    seq: u8,
+    /// Encoded frames waiting to be sent.
+    pub outbox: Vec<Vec<u8>>,
+    /// Vehicles seen (their system ids), for the heartbeat.
+    vehicles: Vec<u8>,
+    now: f64,
+    next_heartbeat: f64,
+    text_queue: BTreeMap<u8, VecDeque<(MavSeverity, String)>>,
+    last_text: BTreeMap<u8, f64>,
+    latest: BTreeMap<(u8, String), Latest>,
+    state: BTreeMap<(u8, String), AhcState>,
+    last_values: f64,
+    /// STATUSTEXT dropped because the queue was full.
+    pub texts_dropped: u64,
+    pub texts_sent: u64,
+}
+
+/// `AHC swash2 LOE 41% UKF+ESMF`: what the planner shows (≤ 50 characters).
+pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
+    let who = d.actuator.as_deref().unwrap_or("");
+    let by: Vec<&str> = d
+        .filters
+        .iter()
+        .map(|f| match *f {
+            "mit-ukf" => "UKF",
+            "mit-esmf" => "ESMF",
+            other => other,
+        })
+        .collect();
+    let by = by.join("+");
+    let (sev, text) = match d.event {
+        Event::Fault | Event::Changed => {
+            let (sev, what) = match d.class {
+                Some(FaultClass::LossOfEffectiveness) => (
+                    MavSeverity::MAV_SEVERITY_CRITICAL,
+                    format!("LOE {:.0}%", (1.0 - d.gamma.unwrap_or(1.0)) * 100.0),
+                ),
+                Some(FaultClass::Stuck) => (MavSeverity::MAV_SEVERITY_CRITICAL, "stuck".into()),
+                Some(FaultClass::Bias) => (
+                    MavSeverity::MAV_SEVERITY_ERROR,
+                    format!("bias {:+.2}", d.delta.unwrap_or(0.0)),
+                ),
+                Some(FaultClass::Drift) => (MavSeverity::MAV_SEVERITY_WARNING, "drift".into()),
+                Some(FaultClass::Unclassified) | None => {
+                    (MavSeverity::MAV_SEVERITY_ERROR, "output off".into())
+                }
+            };
+            (sev, format!("AHC {who} {what} {by}"))
+        }
+        Event::Cleared => (
+            MavSeverity::MAV_SEVERITY_NOTICE,
+            format!("AHC {who} cleared"),
+        ),
+        Event::ExcitationLow => return None,
+        Event::FilterReset => (MavSeverity::MAV_SEVERITY_WARNING, "AHC filter reset".into()),
+        Event::LinkLost | Event::LinkRestored => return None,
+    };
+    let text: String = text.trim().chars().take(50).collect();
+    Some((sev, text))
+}
+
+fn short_name(prefix: &str, name: &str) -> String {
+    let mut s = format!("{prefix}_{name}");
+    s.truncate(10);
+    s
+}
+
+fn state_of(d: &Decision) -> Option<AhcState> {
+    Some(match d.event {
+        Event::Cleared => AhcState::AHC_STATE_HEALTHY,
+        Event::ExcitationLow => AhcState::AHC_STATE_EXCITATION_LOW,
+        Event::Fault | Event::Changed => match d.class? {
+            FaultClass::LossOfEffectiveness => AhcState::AHC_STATE_LOSS_OF_EFFECTIVENESS,
+            FaultClass::Stuck => AhcState::AHC_STATE_STUCK,
+            FaultClass::Bias | FaultClass::Unclassified => AhcState::AHC_STATE_BIAS,
+            FaultClass::Drift => AhcState::AHC_STATE_DRIFT,
+        },
+        _ => return None,
+    })
+}
+
+impl Alerts {
+    fn push(&mut self, sysid: u8, msg: &MavMessage) {
+        let mut frame = Vec::with_capacity(64);
+        encode_v2(sysid, ALERT_COMPID, self.seq, msg, &mut frame);
+        self.seq = self.seq.wrapping_add(1);
+        self.outbox.push(frame);
+    }
+
+    fn see(&mut self, sysid: u8) {
+        if !self.vehicles.contains(&sysid) {
+            self.vehicles.push(sysid);
+        }
+    }
+
+    pub fn on_decision(&mut self, d: &Decision) {
+        self.see(d.sysid);
+        if let (Some(a), Some(s)) = (&d.actuator, state_of(d)) {
+            self.state.insert((d.sysid, a.clone()), s);
+        }
+        if let Some(item) = statustext(d) {
+            let q = self.text_queue.entry(d.sysid).or_default();
+            if q.len() >= TEXT_QUEUE {
+                q.pop_front();
+                self.texts_dropped += 1;
+            }
+            q.push_back(item);
+            self.flush_texts();
+        }
+    }
+
+    pub fn on_estimates(
+        &mut self,
+        t: f64,
+        sysid: u8,
+        est: &[&[AhcEstimate]; 2],
+        profile: &Profile,
+    ) {
+        self.see(sysid);
+        for (j, a) in profile.actuators.iter().enumerate() {
+            self.latest.insert(
+                (sysid, a.name.clone()),
+                Latest {
+                    t,
+                    ukf: est[0][j],
+                    esmf: est[1][j],
+                    channel: a.channel,
+                },
+            );
+        }
+    }
+
+    fn flush_texts(&mut self) {
+        let ids: Vec<u8> = self.text_queue.keys().copied().collect();
+        for sysid in ids {
+            let last = self
+                .last_text
+                .get(&sysid)
+                .copied()
+                .unwrap_or(f64::NEG_INFINITY);
+            if self.now - last < TEXT_INTERVAL_S {
+                continue;
+            }
+            let Some((severity, text)) =
+                self.text_queue.get_mut(&sysid).and_then(|q| q.pop_front())
+            else {
+                continue;
+            };
+            self.last_text.insert(sysid, self.now);
+            self.texts_sent += 1;
+            let msg = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                severity,
+                text: text.as_str().into(),
+                id: 0,
+                chunk_seq: 0,
+            });
+            self.push(sysid, &msg);
+        }
+    }
+
+    /// Advance the wall clock (s): heartbeat, queued texts, values.
+    pub fn tick(&mut self, now: f64) {
+        self.now = now;
+        if now >= self.next_heartbeat {
+            self.next_heartbeat = now + 1.0;
+            // Before any vehicle is seen, announce ourselves as system 1 (ArduPilot's default).
+            let ids = if self.vehicles.is_empty() {
+                vec![1]
+            } else {
+                self.vehicles.clone()
+            };
+            for sysid in ids {
+                let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                    custom_mode: 0,
+                    mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                    autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                    base_mode: MavModeFlag::empty(),
+                    system_status: MavState::MAV_STATE_ACTIVE,
+                    mavlink_version: 3,
+                });
+                self.push(sysid, &msg);
+            }
+        }
+        self.flush_texts();
+        if now - self.last_values >= VALUE_INTERVAL_S {
+            self.last_values = now;
+            let latest: Vec<((u8, String), Latest)> =
+                self.latest.iter().map(|(k, v)| (k.clone(), *v)).collect();
+            for (index, ((sysid, name), l)) in latest.into_iter().enumerate() {
+                let time_boot_ms = (l.t * 1e3).max(0.0) as u32;
+                for (prefix, value) in [("g", l.ukf.gamma), ("d", l.ukf.delta)] {
+                    let msg = MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                        time_boot_ms,
+                        value: value as f32,
+                        name: short_name(prefix, &name).as_str().into(),
+                    });
+                    self.push(sysid, &msg);
+                }
+                let state = self
+                    .state
+                    .get(&(sysid, name.clone()))
+                    .copied()
+                    .unwrap_or(AhcState::AHC_STATE_HEALTHY);
+                let msg = MavMessage::AHC_ESTIMATE(AHC_ESTIMATE_DATA {
+                    time_boot_ms,
+                    actuator: index as u8,
+                    channel: l.channel,
+                    state,
+                    name: name.as_str().into(),
+                    ukf_gamma: l.ukf.gamma as f32,
+                    ukf_gamma_lo: l.ukf.gamma_lo as f32,
+                    ukf_gamma_hi: l.ukf.gamma_hi as f32,
+                    ukf_delta: l.ukf.delta as f32,
+                    ukf_delta_lo: l.ukf.delta_lo as f32,
+                    ukf_delta_hi: l.ukf.delta_hi as f32,
+                    esmf_gamma: l.esmf.gamma as f32,
+                    esmf_gamma_lo: l.esmf.gamma_lo as f32,
+                    esmf_gamma_hi: l.esmf.gamma_hi as f32,
+                    esmf_delta: l.esmf.delta as f32,
+                    esmf_delta_lo: l.esmf.delta_lo as f32,
+                    esmf_delta_hi: l.esmf.delta_hi as f32,
+                });
+                self.push(sysid, &msg);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn statustext_fits_and_names_the_actuator() {
+        let mut d = Decision::monitor(1.0, 1, Event::Fault, "");
+        d.detail = None;
+        d.actuator = Some("swash2".into());
+        d.class = Some(FaultClass::LossOfEffectiveness);
+        d.gamma = Some(0.59);
+        d.filters = vec!["mit-ukf", "mit-esmf"];
+        let (sev, text) = statustext(&d).unwrap();
+        assert_eq!(text, "AHC swash2 LOE 41% UKF+ESMF");
+        assert_eq!(sev, MavSeverity::MAV_SEVERITY_CRITICAL);
+        d.actuator = Some("a_very_long_actuator_name_that_goes_on_and_on".into());
+        assert!(statustext(&d).unwrap().1.len() <= 50);
+    }
+
+    #[test]
+    fn texts_are_rate_limited_and_queued() {
+        let mut a = Alerts::default();
+        a.tick(0.0);
+        let hb = a.outbox.len();
+        assert_eq!(hb, 1, "one heartbeat");
+        let mut d = Decision::monitor(1.0, 1, Event::Cleared, "");
+        d.actuator = Some("motor1".into());
+        for _ in 0..3 {
+            a.on_decision(&d);
+        }
+        assert_eq!(a.texts_sent, 1);
+        a.tick(0.5);
+        assert_eq!(a.texts_sent, 1);
+        a.tick(1.1);
+        assert_eq!(a.texts_sent, 2);
+    }
+}
