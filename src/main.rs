@@ -95,7 +95,8 @@ enum Command {
         conn: String,
         #[command(flatten)]
         run: RunArgs,
-        /// No dashboard (the dashboard is not built yet: the monitor is headless for now).
+        /// No dashboard: decisions are printed as they happen (automatic when stdout is not a
+        /// terminal).
         #[arg(long)]
         headless: bool,
         /// A vehicle silent this long (s) gets a link_lost decision.
@@ -115,8 +116,8 @@ enum Command {
     /// loopback UDP to the monitor; at 32 s swash servo 2 loses 40 % effectiveness, at 45 s the
     /// tail servo gets a bias; it ends by itself after 58 s.
     Demo {
-        /// Print the decisions instead of the dashboard (the dashboard is not built yet, so the
-        /// demo is headless for now).
+        /// Print the decisions instead of showing the dashboard (automatic when stdout is not a
+        /// terminal).
         #[arg(long)]
         headless: bool,
         /// Another vehicle scenario instead of the built-in one (heli-demo).
@@ -318,10 +319,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Monitor {
             conn,
             run,
-            headless: _,
             link_timeout,
             exit_idle,
             alerts,
+            headless,
         } => monitor(
             &conn,
             &run,
@@ -329,9 +330,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             exit_idle,
             alerts.as_deref(),
             None,
+            headless,
         ),
         Command::Demo {
-            headless: _,
+            headless,
             scenario: name,
             decisions,
             estimates,
@@ -355,15 +357,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 decimate: 1,
                 calibrate_until: None,
             };
-            // The monitor stops once the simulated flight has ended.
-            let idle = (1.5 / speed).max(0.5);
+            // Headless, the monitor stops once the simulated flight has ended; with the
+            // dashboard the operator looks on until q.
+            let dashboard = !headless && std::io::stdout().is_terminal();
+            let idle = (!dashboard).then_some((1.5 / speed).max(0.5));
             monitor(
                 "udpin:127.0.0.1:0",
                 &args,
                 2.0,
-                Some(idle),
+                idle,
                 alerts.as_deref(),
                 Some(DemoVehicle { named, speed }),
+                headless,
             )
         }
         Command::Calibrate {
@@ -501,8 +506,11 @@ fn monitor(
     exit_idle: Option<f64>,
     alerts: Option<&str>,
     demo: Option<DemoVehicle>,
+    headless: bool,
 ) -> anyhow::Result<()> {
     let spec: ConnSpec = conn.parse()?;
+    // The dashboard unless asked not to, or when stdout is not a terminal (CI, pipes).
+    let dashboard = !headless && std::io::stdout().is_terminal();
     let alerts: Option<ConnSpec> = alerts.map(str::parse).transpose()?;
     let opts = ahcmon::link::live::LiveOptions {
         link_timeout: std::time::Duration::from_secs_f64(positive("--link-timeout", link_timeout)?),
@@ -548,8 +556,27 @@ fn monitor(
             }
             _ => None,
         };
-        let counters =
-            ahcmon::link::live::run(link, &mut monitor, &mut files, alert_link, opts).await?;
+        let mut ui = if dashboard {
+            files.echo = false;
+            Some(
+                ahcmon::output::dashboard::TerminalUi::start(&spec.to_string())
+                    .context("cannot start the dashboard (try --headless)")?,
+            )
+        } else {
+            None
+        };
+        let counters = ahcmon::link::live::run(
+            link,
+            &mut monitor,
+            &mut files,
+            alert_link,
+            ui.as_mut(),
+            opts,
+        )
+        .await;
+        // Restore the terminal before anything is printed.
+        drop(ui);
+        let counters = counters?;
         if let Some(h) = sim {
             h.await.context("the simulated vehicle stopped")??;
         }

@@ -46,9 +46,13 @@ pub async fn run(
     monitor: &mut Monitor,
     sink: &mut crate::output::jsonl::MonitorFiles,
     mut alerts: Option<Link>,
+    mut ui: Option<&mut crate::output::dashboard::TerminalUi>,
     opts: LiveOptions,
 ) -> Result<LiveCounters, super::conn::ConnError> {
     let clock = Instant::now();
+    // The reader's drop counters, for the dashboard's footer while running.
+    let live_counters = std::sync::Arc::new(std::sync::Mutex::new(FrameCounters::default()));
+    let reader_counters = live_counters.clone();
     let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
     let (done_tx, done_rx) =
         tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
@@ -58,6 +62,9 @@ pub async fn run(
             tokio::select! {
                 r = link.recv() => match r {
                     Ok(frame) => {
+                        if let Ok(mut c) = reader_counters.lock() {
+                            *c = link.counters();
+                        }
                         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                             drops += 1;
                         }
@@ -75,7 +82,8 @@ pub async fn run(
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
-    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    // 10 Hz: link-loss checks, alerts and the dashboard's redraw.
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
     loop {
@@ -114,6 +122,15 @@ pub async fn run(
                     && now.duration_since(last) > idle
                 {
                     break;
+                }
+                if let Some(ui) = ui.as_deref_mut() {
+                    if let crate::output::dashboard::KeyAction::Quit = ui.keys(monitor) {
+                        break;
+                    }
+                    let counters = live_counters.lock().map(|c| *c).unwrap_or_default();
+                    let age = any_frame.map(|t| now.duration_since(t).as_secs_f64());
+                    let lost_any = lost.values().any(|l| *l) || any_frame.is_none();
+                    let _ = ui.draw(monitor, &sink.seen, counters, age, lost_any);
                 }
             }
             _ = &mut ctrl_c => break,

@@ -1,0 +1,625 @@
+//! The operator's dashboard (ratatui): per actuator gamma and delta from both filters with
+//! their bounds as bars, the state in colour, a chart of the selected actuator, the decisions,
+//! and a footer with the link's health. Rendering is a pure function of a snapshot, drawn at a
+//! fixed rate by the caller, so tests render it into a `TestBackend`.
+
+use crate::diagnose::vehicle::{Decision, Event, FaultClass};
+use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
+use crate::link::FrameCounters;
+use crate::model::MAX_ACTUATORS;
+use crate::monitor::Monitor;
+use crate::output::jsonl::describe;
+use ratatui::Frame;
+use ratatui::layout::{Constraint, Direction, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{
+    Axis, Block, Borders, Chart, Clear, Dataset, GraphType, Paragraph, Row, Table,
+};
+use std::collections::{BTreeMap, VecDeque};
+
+/// What the operator selected and toggled.
+#[derive(Debug, Clone, Default)]
+pub struct UiState {
+    pub vehicle: usize,
+    pub actuator: usize,
+    pub paused: bool,
+    pub frozen: bool,
+    pub help: bool,
+}
+
+/// The link as the footer shows it.
+#[derive(Debug, Clone, Default)]
+pub struct LinkInfo {
+    pub name: String,
+    pub counters: FrameCounters,
+    /// Frames per second over the last second.
+    pub rate_hz: f64,
+    /// Seconds since the last frame.
+    pub data_age_s: Option<f64>,
+    pub lost: bool,
+}
+
+/// Time-stamped estimates of both filters for one actuator.
+type Series = VecDeque<(f64, [AhcEstimate; 2])>;
+
+/// Chart history: per (sysid, actuator) the last `window_s` of both filters' estimates.
+#[derive(Debug, Default)]
+pub struct History {
+    pub window_s: f64,
+    series: BTreeMap<(u8, usize), Series>,
+}
+
+impl History {
+    pub fn new(window_s: f64) -> Self {
+        Self {
+            window_s,
+            series: BTreeMap::new(),
+        }
+    }
+
+    /// Take the pipelines' latest estimates (called at the redraw rate).
+    pub fn sample(&mut self, monitor: &Monitor) {
+        for (sysid, p) in &monitor.pipelines {
+            let (Some(profile), Some((t, est))) = (p.profile(), &p.last) else {
+                continue;
+            };
+            let l = profile.actuators.len().min(MAX_ACTUATORS);
+            for (j, (ukf, esmf)) in est[0][..l].iter().zip(&est[1][..l]).enumerate() {
+                let s = self.series.entry((*sysid, j)).or_default();
+                if s.back().is_some_and(|(last, _)| *last >= *t) {
+                    continue;
+                }
+                s.push_back((*t, [*ukf, *esmf]));
+                while s.front().is_some_and(|(t0, _)| t - t0 > self.window_s) {
+                    s.pop_front();
+                }
+            }
+        }
+    }
+}
+
+fn class_style(c: Option<FaultClass>) -> (String, Style) {
+    match c {
+        None => ("healthy".into(), Style::default().fg(Color::Green)),
+        Some(FaultClass::Drift) => ("drift".into(), Style::default().fg(Color::Yellow)),
+        Some(FaultClass::Unclassified) => (
+            "output off".into(),
+            Style::default().fg(Color::Red).add_modifier(Modifier::BOLD),
+        ),
+        Some(c) => (
+            match c {
+                FaultClass::LossOfEffectiveness => "LOE".into(),
+                other => other.as_str().into(),
+            },
+            Style::default().fg(Color::Red).add_modifier(Modifier::BOLD),
+        ),
+    }
+}
+
+/// A bar of `width` cells over [lo_axis, hi_axis]: the bound as `─`, the healthy value as
+/// `│`, the estimate as `●`.
+fn bound_bar(e: f64, lo: f64, hi: f64, healthy: f64, axis: (f64, f64), width: usize) -> String {
+    let cell = |v: f64| -> usize {
+        let x = ((v - axis.0) / (axis.1 - axis.0)).clamp(0.0, 1.0);
+        ((x * (width - 1) as f64).round() as usize).min(width - 1)
+    };
+    let mut bar = vec![' '; width];
+    if lo.is_finite() && hi.is_finite() {
+        for c in bar.iter_mut().take(cell(hi) + 1).skip(cell(lo)) {
+            *c = '─';
+        }
+    }
+    bar[cell(healthy)] = '│';
+    if e.is_finite() {
+        bar[cell(e)] = '●';
+    }
+    bar.into_iter().collect()
+}
+
+/// Draw the whole screen.
+pub fn render(
+    f: &mut Frame,
+    monitor: &Monitor,
+    decisions: &[Decision],
+    history: &History,
+    ui: &UiState,
+    link: &LinkInfo,
+) {
+    let area = f.area();
+    let sysids: Vec<u8> = monitor.pipelines.keys().copied().collect();
+    let sysid = sysids
+        .get(ui.vehicle.min(sysids.len().saturating_sub(1)))
+        .copied();
+    let rows = Layout::default()
+        .direction(Direction::Vertical)
+        .constraints([
+            Constraint::Length(1),
+            Constraint::Length(table_height(monitor, sysid)),
+            Constraint::Min(6),
+            Constraint::Length(if area.height >= 40 { 10 } else { 5 }),
+            Constraint::Length(1),
+        ])
+        .split(area);
+    header(f, rows[0], monitor, &sysids, sysid, ui);
+    actuator_table(f, rows[1], monitor, decisions, sysid, ui);
+    chart(f, rows[2], monitor, history, sysid, ui);
+    decision_list(f, rows[3], decisions, sysid);
+    footer(f, rows[4], link, ui);
+    if ui.help {
+        help(f, area);
+    }
+}
+
+fn table_height(monitor: &Monitor, sysid: Option<u8>) -> u16 {
+    let n = sysid
+        .and_then(|s| monitor.pipelines.get(&s))
+        .and_then(|p| p.profile())
+        .map_or(1, |p| p.actuators.len());
+    (n as u16 + 3).min(MAX_ACTUATORS as u16 + 3)
+}
+
+fn header(
+    f: &mut Frame,
+    area: Rect,
+    monitor: &Monitor,
+    sysids: &[u8],
+    sysid: Option<u8>,
+    ui: &UiState,
+) {
+    let mut spans = vec![Span::styled(
+        " ahcmon ",
+        Style::default().fg(Color::Black).bg(Color::Cyan),
+    )];
+    for s in sysids {
+        let style = if Some(*s) == sysid {
+            Style::default().add_modifier(Modifier::REVERSED)
+        } else {
+            Style::default()
+        };
+        let kind = monitor
+            .assembler
+            .vehicles
+            .get(s)
+            .and_then(|v| v.info.mav_type)
+            .map_or("?".to_string(), |t| {
+                format!("{t:?}")
+                    .trim_start_matches("MAV_TYPE_")
+                    .to_lowercase()
+            });
+        spans.push(Span::raw(" "));
+        spans.push(Span::styled(format!("sysid {s} {kind}"), style));
+    }
+    if let Some(p) = sysid.and_then(|s| monitor.pipelines.get(&s)) {
+        let name = p.profile().map_or("-", |p| p.name.as_str());
+        spans.push(Span::raw(format!("  {name} · {}", p.stage_name())));
+    } else {
+        spans.push(Span::raw("  waiting for a vehicle"));
+    }
+    if ui.paused {
+        spans.push(Span::styled("  PAUSED", Style::default().fg(Color::Yellow)));
+    }
+    f.render_widget(Paragraph::new(Line::from(spans)), area);
+}
+
+fn actuator_table(
+    f: &mut Frame,
+    area: Rect,
+    monitor: &Monitor,
+    decisions: &[Decision],
+    sysid: Option<u8>,
+    ui: &UiState,
+) {
+    let block = Block::default()
+        .borders(Borders::ALL)
+        .title(" actuators: gamma [0, 2] and delta [-1, 1], bound ─, healthy │, estimate ● ");
+    let Some(p) = sysid.and_then(|s| monitor.pipelines.get(&s)) else {
+        f.render_widget(Paragraph::new("no samples yet").block(block), area);
+        return;
+    };
+    let (Some(profile), Some((_, est))) = (p.profile(), &p.last) else {
+        let text = format!("{} …", p.stage_name());
+        f.render_widget(Paragraph::new(text).block(block), area);
+        return;
+    };
+    // Bar width from the space left after the fixed columns.
+    let bar = ((area.width as usize).saturating_sub(10 + 4 + 2 * 7 + 12 + 8) / 4).clamp(4, 30);
+    let header = Row::new(vec![
+        "actuator".to_string(),
+        "ch".into(),
+        format!("{:<w$}", "UKF gamma", w = bar + 6),
+        format!("{:<w$}", "UKF delta", w = bar),
+        format!("{:<w$}", "ESMF gamma", w = bar + 6),
+        format!("{:<w$}", "ESMF delta", w = bar),
+        "state".into(),
+    ])
+    .style(Style::default().add_modifier(Modifier::BOLD));
+    let mut rows = vec![];
+    for (j, a) in profile.actuators.iter().enumerate() {
+        let (mut state, mut style) = class_style(p.active[j]);
+        // No fault, but the last word on this actuator was that gain and bias cannot be told
+        // apart: say so rather than "healthy".
+        let last = decisions
+            .iter()
+            .rev()
+            .find(|d| Some(d.sysid) == sysid && d.actuator.as_deref() == Some(a.name.as_str()));
+        if p.active[j].is_none() && last.is_some_and(|d| d.event == Event::ExcitationLow) {
+            state = "excitation low".into();
+            style = Style::default().fg(Color::Yellow);
+        }
+        let cells = |e: &AhcEstimate| {
+            (
+                format!(
+                    "{:5.2} {}",
+                    e.gamma,
+                    bound_bar(e.gamma, e.gamma_lo, e.gamma_hi, 1.0, (0.0, 2.0), bar)
+                ),
+                bound_bar(e.delta, e.delta_lo, e.delta_hi, 0.0, (-1.0, 1.0), bar),
+            )
+        };
+        let (ug, ud) = cells(&est[0][j]);
+        let (eg, ed) = cells(&est[1][j]);
+        let mut row = Row::new(vec![
+            a.name.clone(),
+            a.channel.to_string(),
+            ug,
+            ud,
+            eg,
+            ed,
+            state,
+        ])
+        .style(style);
+        if j == ui.actuator {
+            row = row.style(style.add_modifier(Modifier::REVERSED));
+        }
+        rows.push(row);
+    }
+    let widths = [
+        Constraint::Length(9),
+        Constraint::Length(3),
+        Constraint::Length(bar as u16 + 6),
+        Constraint::Length(bar as u16),
+        Constraint::Length(bar as u16 + 6),
+        Constraint::Length(bar as u16),
+        Constraint::Min(8),
+    ];
+    f.render_widget(Table::new(rows, widths).header(header).block(block), area);
+}
+
+fn chart(
+    f: &mut Frame,
+    area: Rect,
+    monitor: &Monitor,
+    history: &History,
+    sysid: Option<u8>,
+    ui: &UiState,
+) {
+    let Some(s) = sysid else {
+        f.render_widget(
+            Block::default().borders(Borders::ALL).title(" chart "),
+            area,
+        );
+        return;
+    };
+    let name = monitor
+        .pipelines
+        .get(&s)
+        .and_then(|p| p.profile())
+        .and_then(|p| p.actuators.get(ui.actuator))
+        .map_or("-".to_string(), |a| a.name.clone());
+    let series = history.series.get(&(s, ui.actuator));
+    let halves = Layout::default()
+        .direction(Direction::Horizontal)
+        .constraints([Constraint::Percentage(50), Constraint::Percentage(50)])
+        .split(area);
+    for (k, (what, healthy)) in [("gamma", 1.0), ("delta", 0.0)].into_iter().enumerate() {
+        let pick = |e: &AhcEstimate| -> (f64, f64, f64) {
+            if k == 0 {
+                (e.gamma, e.gamma_lo, e.gamma_hi)
+            } else {
+                (e.delta, e.delta_lo, e.delta_hi)
+            }
+        };
+        let mut lines: Vec<Vec<(f64, f64)>> = vec![vec![]; 6];
+        let (mut t0, mut t1) = (0.0, 1.0);
+        if let Some(series) = series {
+            if let (Some(a), Some(b)) = (series.front(), series.back()) {
+                t0 = a.0;
+                t1 = b.0.max(a.0 + 1.0);
+            }
+            for (t, est) in series {
+                for fi in 0..2 {
+                    let (v, lo, hi) = pick(&est[fi]);
+                    lines[3 * fi].push((*t, v));
+                    lines[3 * fi + 1].push((*t, lo));
+                    lines[3 * fi + 2].push((*t, hi));
+                }
+            }
+        }
+        // Scale on the estimates and the healthy value; bounds are clipped.
+        let (mut lo, mut hi): (f64, f64) = (healthy - 0.2, healthy + 0.2);
+        for l in [&lines[0], &lines[3]] {
+            for (_, v) in l.iter() {
+                if v.is_finite() {
+                    lo = lo.min(*v);
+                    hi = hi.max(*v);
+                }
+            }
+        }
+        let pad = 0.1 * (hi - lo);
+        let (lo, hi) = (lo - pad, hi + pad);
+        for l in lines.iter_mut() {
+            for p in l.iter_mut() {
+                p.1 = p.1.clamp(lo, hi);
+            }
+        }
+        let colours = [Color::Cyan, Color::Magenta];
+        let mut sets = vec![];
+        for fi in 0..2 {
+            sets.push(
+                Dataset::default()
+                    .name(FILTER_NAMES[fi])
+                    .marker(Marker::Braille)
+                    .graph_type(GraphType::Line)
+                    .style(Style::default().fg(colours[fi]))
+                    .data(&lines[3 * fi]),
+            );
+            for b in 1..3 {
+                sets.push(
+                    Dataset::default()
+                        .marker(Marker::Dot)
+                        .style(Style::default().fg(colours[fi]).add_modifier(Modifier::DIM))
+                        .data(&lines[3 * fi + b]),
+                );
+            }
+        }
+        let title = format!(
+            " {name} {what}{} ",
+            if ui.frozen { " (frozen)" } else { "" }
+        );
+        let chart = Chart::new(sets)
+            .block(Block::default().borders(Borders::ALL).title(title))
+            .x_axis(Axis::default().bounds([t0, t1]).labels(vec![
+                Span::raw(format!("{t0:.0} s")),
+                Span::raw(format!("{t1:.0} s")),
+            ]))
+            .y_axis(Axis::default().bounds([lo, hi]).labels(vec![
+                Span::raw(format!("{lo:.2}")),
+                Span::raw(format!("{hi:.2}")),
+            ]));
+        f.render_widget(chart, halves[k]);
+    }
+}
+
+fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Option<u8>) {
+    let n = area.height.saturating_sub(2) as usize;
+    let lines: Vec<Line> = decisions
+        .iter()
+        .rev()
+        .filter(|d| sysid.is_none_or(|s| d.sysid == s))
+        .take(n)
+        .map(|d| {
+            let style = match d.event {
+                Event::Fault | Event::Changed => Style::default().fg(Color::Red),
+                Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
+                Event::LinkLost | Event::FilterReset => Style::default().fg(Color::Yellow),
+                Event::ExcitationLow => Style::default().fg(Color::DarkGray),
+            };
+            Line::styled(describe(d), style)
+        })
+        .collect();
+    f.render_widget(
+        Paragraph::new(lines).block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(" decisions (newest first) "),
+        ),
+        area,
+    );
+}
+
+fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, ui: &UiState) {
+    let state = if link.lost {
+        Span::styled(
+            " LINK LOST ",
+            Style::default().fg(Color::White).bg(Color::Red),
+        )
+    } else {
+        Span::styled(
+            " link ok ",
+            Style::default().fg(Color::Black).bg(Color::Green),
+        )
+    };
+    let c = &link.counters;
+    let age = link
+        .data_age_s
+        .map_or("-".to_string(), |a| format!("{a:.1} s"));
+    let text = format!(
+        " {} · {:.0} msg/s · age {age} · drops crc {} resync {} unknown {} · {}",
+        link.name,
+        link.rate_hz,
+        c.bad_crc,
+        c.resync,
+        c.unknown_id,
+        if ui.paused {
+            "p resume"
+        } else {
+            "?: help  q: quit"
+        }
+    );
+    f.render_widget(
+        Paragraph::new(Line::from(vec![state, Span::raw(text)])),
+        area,
+    );
+}
+
+fn help(f: &mut Frame, area: Rect) {
+    let w = 50.min(area.width);
+    let h = 11.min(area.height);
+    let r = Rect::new(
+        area.x + (area.width - w) / 2,
+        area.y + (area.height - h) / 2,
+        w,
+        h,
+    );
+    let text = vec![
+        Line::raw("↑/↓      select actuator"),
+        Line::raw("tab      next vehicle"),
+        Line::raw("p        pause / resume the display"),
+        Line::raw("f        freeze / unfreeze the chart"),
+        Line::raw("?        this help"),
+        Line::raw("q ctrl-c quit (the summary is printed)"),
+        Line::raw(""),
+        Line::raw("bars: bound ─, healthy │, estimate ●"),
+    ];
+    f.render_widget(Clear, r);
+    f.render_widget(
+        Paragraph::new(text).block(Block::default().borders(Borders::ALL).title(" keys ")),
+        r,
+    );
+}
+
+/// The dashboard on a real terminal: raw mode and the alternate screen while it lives, the
+/// terminal restored on drop, on panic (hook) and on quit.
+pub struct TerminalUi {
+    terminal: ratatui::Terminal<ratatui::backend::CrosstermBackend<std::io::Stdout>>,
+    pub history: History,
+    pub ui: UiState,
+    pub link: LinkInfo,
+    frames_window: VecDeque<(std::time::Instant, u64)>,
+}
+
+fn restore_terminal() {
+    use ratatui::crossterm::{execute, terminal};
+    let _ = terminal::disable_raw_mode();
+    let _ = execute!(
+        std::io::stdout(),
+        terminal::LeaveAlternateScreen,
+        ratatui::crossterm::cursor::Show
+    );
+}
+
+/// What a key press asks for.
+pub enum KeyAction {
+    None,
+    Quit,
+}
+
+impl TerminalUi {
+    pub fn start(link_name: &str) -> std::io::Result<Self> {
+        use ratatui::crossterm::{execute, terminal};
+        terminal::enable_raw_mode()?;
+        execute!(std::io::stdout(), terminal::EnterAlternateScreen)?;
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            restore_terminal();
+            previous(info);
+        }));
+        let backend = ratatui::backend::CrosstermBackend::new(std::io::stdout());
+        let terminal = ratatui::Terminal::new(backend)?;
+        Ok(Self {
+            terminal,
+            history: History::new(30.0),
+            ui: UiState::default(),
+            link: LinkInfo {
+                name: link_name.to_string(),
+                ..Default::default()
+            },
+            frames_window: VecDeque::new(),
+        })
+    }
+
+    /// Read pending keys without waiting.
+    pub fn keys(&mut self, monitor: &Monitor) -> KeyAction {
+        use ratatui::crossterm::event::{
+            self, Event as CEvent, KeyCode, KeyEventKind, KeyModifiers,
+        };
+        while event::poll(std::time::Duration::ZERO).unwrap_or(false) {
+            let Ok(CEvent::Key(k)) = event::read() else {
+                continue;
+            };
+            if k.kind != KeyEventKind::Press {
+                continue;
+            }
+            let actuators = monitor
+                .pipelines
+                .values()
+                .nth(self.ui.vehicle)
+                .and_then(|p| p.profile())
+                .map_or(1, |p| p.actuators.len());
+            match k.code {
+                KeyCode::Char('q') => return KeyAction::Quit,
+                KeyCode::Char('c') if k.modifiers.contains(KeyModifiers::CONTROL) => {
+                    return KeyAction::Quit;
+                }
+                KeyCode::Char('p') => self.ui.paused = !self.ui.paused,
+                KeyCode::Char('f') => self.ui.frozen = !self.ui.frozen,
+                KeyCode::Char('?') => self.ui.help = !self.ui.help,
+                KeyCode::Esc => self.ui.help = false,
+                KeyCode::Down | KeyCode::Char('j') => {
+                    self.ui.actuator = (self.ui.actuator + 1) % actuators.max(1);
+                }
+                KeyCode::Up | KeyCode::Char('k') => {
+                    self.ui.actuator = (self.ui.actuator + actuators.max(1) - 1) % actuators.max(1);
+                }
+                KeyCode::Tab | KeyCode::Right => {
+                    self.ui.vehicle = (self.ui.vehicle + 1) % monitor.pipelines.len().max(1);
+                    self.ui.actuator = 0;
+                }
+                KeyCode::BackTab | KeyCode::Left => {
+                    let n = monitor.pipelines.len().max(1);
+                    self.ui.vehicle = (self.ui.vehicle + n - 1) % n;
+                    self.ui.actuator = 0;
+                }
+                _ => {}
+            }
+        }
+        KeyAction::None
+    }
+
+    /// Redraw from the current state (called at a fixed rate).
+    pub fn draw(
+        &mut self,
+        monitor: &Monitor,
+        decisions: &[Decision],
+        counters: FrameCounters,
+        last_frame_age_s: Option<f64>,
+        lost: bool,
+    ) -> std::io::Result<()> {
+        let now = std::time::Instant::now();
+        self.frames_window.push_back((now, counters.frames));
+        while self
+            .frames_window
+            .front()
+            .is_some_and(|(t, _)| now.duration_since(*t).as_secs_f64() > 1.0)
+        {
+            self.frames_window.pop_front();
+        }
+        if let (Some(a), Some(b)) = (self.frames_window.front(), self.frames_window.back()) {
+            let dt = b.0.duration_since(a.0).as_secs_f64();
+            if dt > 0.0 {
+                self.link.rate_hz = (b.1 - a.1) as f64 / dt;
+            }
+        }
+        self.link.counters = counters;
+        self.link.data_age_s = last_frame_age_s;
+        self.link.lost = lost;
+        if self.ui.paused {
+            return Ok(());
+        }
+        if !self.ui.frozen {
+            self.history.sample(monitor);
+        }
+        let (history, ui, link) = (&self.history, &self.ui, &self.link);
+        self.terminal
+            .draw(|f| render(f, monitor, decisions, history, ui, link))?;
+        Ok(())
+    }
+}
+
+impl Drop for TerminalUi {
+    fn drop(&mut self) {
+        restore_terminal();
+    }
+}

@@ -1,0 +1,124 @@
+//! The dashboard rendered into ratatui's TestBackend from a real pipeline state: the demo
+//! scenario's MAVLink stream (written by `ahcmon sim --tlog`) fed through the monitor up to a
+//! chosen time. Healthy, fault, excitation low and link lost; 80x24 and 200x60.
+
+mod common;
+
+use ahcmon::diagnose::vehicle::Decision;
+use ahcmon::link::TlogReader;
+use ahcmon::monitor::Monitor;
+use ahcmon::output::dashboard::{History, LinkInfo, UiState, render};
+use ahcmon::output::jsonl::MonitorFiles;
+use ahcmon::pipeline::PipelineConfig;
+use ratatui::Terminal;
+use ratatui::backend::TestBackend;
+use std::sync::OnceLock;
+
+fn demo_tlog() -> &'static std::path::Path {
+    static PATH: OnceLock<std::path::PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let dir = common::temp_dir("dashboard_tlog");
+        let path = dir.join("demo.tlog");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+            .args(["sim", "--scenario", "heli-demo", "--tlog"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        path
+    })
+}
+
+/// The monitor's state after the stream up to vehicle time `until` (s).
+fn state_at(until: f64) -> (Monitor, Vec<Decision>, History) {
+    let mut r = TlogReader::open(demo_tlog()).unwrap();
+    let mut m = Monitor::new(PipelineConfig::default());
+    let mut files = MonitorFiles::new(None, None, 1).unwrap();
+    files.echo = false;
+    let mut h = History::new(30.0);
+    while let Some((_, f)) = r.next_frame().unwrap() {
+        m.on_frame(&f, &mut files);
+        h.sample(&m);
+        let t = m.pipelines.values().next().and_then(|p| p.last_sample_t);
+        if t.is_some_and(|t| t >= until) {
+            break;
+        }
+    }
+    (m, files.seen, h)
+}
+
+fn screen(until: f64, w: u16, h: u16, lost: bool) -> String {
+    let (m, d, hist) = state_at(until);
+    let mut term = Terminal::new(TestBackend::new(w, h)).unwrap();
+    let link = LinkInfo {
+        name: "udpin:127.0.0.1:14550".into(),
+        rate_hz: 200.0,
+        data_age_s: Some(0.02),
+        lost,
+        ..Default::default()
+    };
+    term.draw(|f| render(f, &m, &d, &hist, &UiState::default(), &link))
+        .unwrap();
+    let buf = term.backend().buffer().clone();
+    let mut out = String::new();
+    for y in 0..h {
+        for x in 0..w {
+            out.push_str(buf[(x, y)].symbol());
+        }
+        out.push('\n');
+    }
+    out
+}
+
+fn row<'a>(s: &'a str, name: &str) -> &'a str {
+    s.lines()
+        .find(|l| l.contains(&format!("│{name} ")))
+        .unwrap_or_else(|| panic!("no row for {name}:\n{s}"))
+}
+
+#[test]
+fn healthy_before_the_fault() {
+    // Vehicle time 41 s: calibrated, warm, before the swash fault at 42 s.
+    let s = screen(41.5, 80, 24, false);
+    assert!(s.contains("sysid 1 helicopter"), "{s}");
+    assert!(s.contains("estimating"), "{s}");
+    assert!(row(&s, "swash1").contains("healthy") || row(&s, "swash1").contains("excitation"));
+    assert!(!s.contains("output off") && !s.contains("LOE"), "{s}");
+    assert!(s.contains("link ok"), "{s}");
+}
+
+#[test]
+fn fault_shows_on_the_right_actuator() {
+    let s = screen(50.0, 200, 60, false);
+    let swash2 = row(&s, "swash2");
+    assert!(
+        swash2.contains("output off") || swash2.contains("LOE"),
+        "{s}"
+    );
+    for other in ["swash1", "swash3", "tail"] {
+        let r = row(&s, other);
+        assert!(
+            !r.contains("output off") && !r.contains("LOE"),
+            "{other}: {s}"
+        );
+    }
+    assert!(s.contains("fault  swash2 (ch 2)"), "{s}");
+}
+
+#[test]
+fn excitation_low_is_said_not_guessed() {
+    let s = screen(41.0, 200, 60, false);
+    assert!(
+        s.contains("excitation low") || s.contains("excitation_low"),
+        "{s}"
+    );
+}
+
+#[test]
+fn link_lost_in_the_footer_at_both_sizes() {
+    for (w, h) in [(80, 24), (200, 60)] {
+        let s = screen(45.0, w, h, true);
+        assert!(s.contains("LINK LOST"), "{w}x{h}:\n{s}");
+        assert_eq!(s.lines().count(), h as usize);
+    }
+}
