@@ -111,6 +111,11 @@ enum Command {
         /// NAMED_VALUE_FLOAT g_/d_<actuator> at 2 Hz and AHC_ESTIMATE.
         #[arg(long, value_name = "CONN")]
         alerts: Option<String>,
+        /// Ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU at this rate
+        /// (SET_MESSAGE_INTERVAL; reports COMMAND_ACK and the rates achieved). Off by
+        /// default: without it nothing is ever sent to the vehicle.
+        #[arg(long, value_name = "HZ")]
+        request_rates: Option<f64>,
     },
     /// The built-in demonstration: a simulated H3-120 helicopter flies in this process over
     /// loopback UDP to the monitor; at 32 s swash servo 2 loses 40 % effectiveness, at 45 s the
@@ -164,7 +169,7 @@ enum Command {
         /// As fast as the CPU goes (the default).
         #[arg(long)]
         fast: bool,
-        /// No dashboard (the dashboard is not built yet: replay is always headless for now).
+        /// No dashboard (automatic when stdout is not a terminal).
         #[arg(long)]
         headless: bool,
         /// Draw every actuator's gamma and delta with both filters' bounds and the decisions
@@ -323,14 +328,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             exit_idle,
             alerts,
             headless,
+            request_rates,
         } => monitor(
             &conn,
             &run,
-            link_timeout,
-            exit_idle,
-            alerts.as_deref(),
+            MonitorOptions {
+                link_timeout,
+                exit_idle,
+                alerts,
+                request_rates,
+                headless,
+            },
             None,
-            headless,
         ),
         Command::Demo {
             headless,
@@ -364,11 +373,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             monitor(
                 "udpin:127.0.0.1:0",
                 &args,
-                2.0,
-                idle,
-                alerts.as_deref(),
+                MonitorOptions {
+                    link_timeout: 2.0,
+                    exit_idle: idle,
+                    alerts,
+                    request_rates: None,
+                    headless,
+                },
                 Some(DemoVehicle { named, speed }),
-                headless,
             )
         }
         Command::Calibrate {
@@ -382,9 +394,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             run,
             speed,
             fast: _,
-            headless: _,
+            headless,
             plot,
-        } => replay(&file, &run, speed, plot.as_deref()),
+        } => replay(&file, &run, speed, plot.as_deref(), headless),
     }
 }
 
@@ -499,15 +511,28 @@ struct DemoVehicle {
     speed: f64,
 }
 
+struct MonitorOptions {
+    link_timeout: f64,
+    exit_idle: Option<f64>,
+    alerts: Option<String>,
+    request_rates: Option<f64>,
+    headless: bool,
+}
+
 fn monitor(
     conn: &str,
     args: &RunArgs,
-    link_timeout: f64,
-    exit_idle: Option<f64>,
-    alerts: Option<&str>,
+    o: MonitorOptions,
     demo: Option<DemoVehicle>,
-    headless: bool,
 ) -> anyhow::Result<()> {
+    let MonitorOptions {
+        link_timeout,
+        exit_idle,
+        alerts,
+        request_rates,
+        headless,
+    } = o;
+    let alerts = alerts.as_deref();
     let spec: ConnSpec = conn.parse()?;
     // The dashboard unless asked not to, or when stdout is not a terminal (CI, pipes).
     let dashboard = !headless && std::io::stdout().is_terminal();
@@ -516,6 +541,9 @@ fn monitor(
         link_timeout: std::time::Duration::from_secs_f64(positive("--link-timeout", link_timeout)?),
         exit_idle: exit_idle
             .map(|s| positive("--exit-idle", s).map(std::time::Duration::from_secs_f64))
+            .transpose()?,
+        request_rates: request_rates
+            .map(|hz| positive("--request-rates", hz))
             .transpose()?,
         ..Default::default()
     };
@@ -683,6 +711,7 @@ fn replay(
     args: &RunArgs,
     speed: Option<f64>,
     plot: Option<&std::path::Path>,
+    headless: bool,
 ) -> anyhow::Result<()> {
     if let Some(x) = speed
         && !(x.is_finite() && x > 0.0)
@@ -705,11 +734,33 @@ fn replay(
         std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
         files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
     }
-    let progress = std::io::stderr().is_terminal();
+    // The dashboard at a replay speed a person can follow; --fast (the default) is headless.
+    let mut ui = if !headless && std::io::stdout().is_terminal() {
+        files.echo = false;
+        Some(
+            ahcmon::output::dashboard::TerminalUi::start(&format!("replay {}", file.display()))
+                .context("cannot start the dashboard (try --headless)")?,
+        )
+    } else {
+        None
+    };
+    let progress = ui.is_none() && std::io::stderr().is_terminal();
     let started = std::time::Instant::now();
     let mut first_ts = None;
     let mut shown = 0;
+    let mut last_draw = std::time::Instant::now();
+    let mut quit = false;
     while let Some((ts, frame)) = reader.next_frame().map_err(input_error)? {
+        if let Some(ui) = ui.as_mut()
+            && last_draw.elapsed() >= std::time::Duration::from_millis(100)
+        {
+            last_draw = std::time::Instant::now();
+            if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(&monitor) {
+                quit = true;
+                break;
+            }
+            let _ = ui.draw(&monitor, &files.seen, reader.counters, Some(0.0), false);
+        }
         if let Some(x) = speed {
             let t0 = *first_ts.get_or_insert(ts);
             let due = std::time::Duration::from_secs_f64(ts.saturating_sub(t0) as f64 * 1e-6 / x);
@@ -727,6 +778,20 @@ fn replay(
         }
     }
     monitor.finish(&mut files);
+    let replay_time = started.elapsed();
+    // End of the log: the dashboard stays until q.
+    if let Some(ui) = ui.as_mut()
+        && !quit
+    {
+        loop {
+            if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(&monitor) {
+                break;
+            }
+            let _ = ui.draw(&monitor, &files.seen, reader.counters, None, true);
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+    }
+    drop(ui);
     if progress {
         eprint!("\r{:60}\r", "");
     }
@@ -746,7 +811,7 @@ fn replay(
     println!(
         "replayed {} in {:.2} s",
         file.display(),
-        started.elapsed().as_secs_f64()
+        replay_time.as_secs_f64()
     );
     Ok(())
 }

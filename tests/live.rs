@@ -266,3 +266,132 @@ fn demo_alerts_reach_a_pymavlink_listener() {
     assert!(names.iter().any(|n| n == "g_swash2"), "{names:?}");
     assert!(names.iter().any(|n| n == "d_tail"), "{names:?}");
 }
+
+#[test]
+fn mavproxy_forwards_our_statustext_to_its_outputs() {
+    use std::io::{BufRead, BufReader};
+    let py = common::python();
+    let mavproxy = py.with_file_name("mavproxy.py");
+    assert!(
+        mavproxy.exists(),
+        "{} missing: `bash .ci/run` installs MAVProxy from tests/reference/requirements.txt",
+        mavproxy.display()
+    );
+    let (master, out_port) = (free_udp_port(), free_udp_port());
+    let state = common::temp_dir("live_mavproxy");
+    // The planner side: a pymavlink listener on MAVProxy's --out.
+    let mut listener = Command::new(&py)
+        .args([
+            "tests/reference/alerts_listener.py",
+            &out_port.to_string(),
+            "60",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(listener.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    assert_eq!(line.trim(), "ready");
+    let mut proxy = Command::new(&py)
+        .arg(&mavproxy)
+        .arg(format!("--master=udpin:127.0.0.1:{master}"))
+        .arg(format!("--out=udp:127.0.0.1:{out_port}"))
+        .arg("--non-interactive")
+        .arg(format!("--state-basedir={}", state.display()))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // MAVProxy needs a few seconds to start listening.
+    std::thread::sleep(std::time::Duration::from_secs(5));
+    let demo = Command::new(bin())
+        .args(["demo", "--headless", "--speed", "4", "--alerts"])
+        .arg(format!("udpout:127.0.0.1:{master}"))
+        .output()
+        .unwrap();
+    line.clear();
+    out.read_line(&mut line).unwrap();
+    let _ = listener.wait();
+    let _ = proxy.kill();
+    let _ = proxy.wait();
+    assert!(
+        demo.status.success(),
+        "{}",
+        String::from_utf8_lossy(&demo.stderr)
+    );
+    let seen: Value = serde_json::from_str(&line).expect("listener JSON");
+    let texts: Vec<&str> = seen["statustext"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s[1].as_str().unwrap())
+        .collect();
+    assert!(
+        texts.iter().any(|t| t.starts_with("AHC swash2 ")),
+        "MAVProxy did not forward our STATUSTEXT: {seen}"
+    );
+}
+
+/// The monitor on udpin beside a stand-in autopilot; returns what the autopilot received and
+/// the monitor's stderr.
+fn vehicle_hears(extra: &[&str]) -> (Value, String) {
+    let port = free_udp_port();
+    let monitor = Command::new(bin())
+        .args([
+            "monitor",
+            &format!("udpin:127.0.0.1:{port}"),
+            "--headless",
+            "--exit-idle",
+            "1.5",
+        ])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let vehicle = common::run_python(&["tests/reference/fake_vehicle.py", &port.to_string(), "4"]);
+    let out = monitor.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (
+        serde_json::from_str(vehicle.trim()).expect("vehicle JSON"),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
+    let (heard, _) = vehicle_hears(&[]);
+    assert_eq!(
+        heard,
+        serde_json::json!([]),
+        "the monitor sent something: {heard}"
+    );
+
+    let (heard, stderr) = vehicle_hears(&["--request-rates", "25"]);
+    let msgs = heard.as_array().unwrap();
+    assert_eq!(msgs.len(), 3, "{heard}");
+    let mut ids = vec![];
+    for m in msgs {
+        assert_eq!(m["type"], "COMMAND_LONG", "{m}");
+        assert_eq!(m["command"], 511, "MAV_CMD_SET_MESSAGE_INTERVAL: {m}");
+        assert_eq!(m["param2"], 40000.0, "25 Hz = 40000 us: {m}");
+        assert_eq!(m["target"], serde_json::json!([1, 1]));
+        assert_eq!(m["src"], serde_json::json!([1, 191]));
+        ids.push(m["param1"].as_f64().unwrap() as u32);
+    }
+    ids.sort();
+    assert_eq!(ids, vec![27, 30, 36]);
+    assert!(
+        stderr.contains("COMMAND_ACK SET_MESSAGE_INTERVAL 3/3"),
+        "{stderr}"
+    );
+}

@@ -19,6 +19,9 @@ pub struct LiveOptions {
     pub exit_idle: Option<Duration>,
     /// Frames buffered between the reader and the estimators.
     pub channel_capacity: usize,
+    /// `--request-rates HZ`: ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU at
+    /// this rate (SET_MESSAGE_INTERVAL), the only thing ever sent on the vehicle link.
+    pub request_rates: Option<f64>,
 }
 
 impl Default for LiveOptions {
@@ -27,6 +30,7 @@ impl Default for LiveOptions {
             link_timeout: Duration::from_secs(2),
             exit_idle: None,
             channel_capacity: 4096,
+            request_rates: None,
         }
     }
 }
@@ -56,10 +60,17 @@ pub async fn run(
     let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
     let (done_tx, done_rx) =
         tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
+    // Frames for the vehicle link (only SET_MESSAGE_INTERVAL, only with --request-rates).
+    let (vehicle_tx, mut vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
     let reader = tokio::spawn(async move {
         let mut drops = 0u64;
         let result = loop {
             tokio::select! {
+                Some(out) = vehicle_rx.recv() => {
+                    if let Err(e) = link.send(&out).await {
+                        break Err(e);
+                    }
+                }
                 r = link.recv() => match r {
                     Ok(frame) => {
                         if let Ok(mut c) = reader_counters.lock() {
@@ -82,6 +93,7 @@ pub async fn run(
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
+    let mut rates = RateRequests::default();
     // 10 Hz: link-loss checks, alerts and the dashboard's redraw.
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let ctrl_c = tokio::signal::ctrl_c();
@@ -97,6 +109,11 @@ pub async fn run(
                     if lost.insert(frame.sysid, false) == Some(true) {
                         let t = vehicle_time(monitor, frame.sysid);
                         sink.link_event(&Decision::monitor(t, frame.sysid, Event::LinkRestored, "frames arrive again"));
+                    }
+                }
+                if let Some(hz) = opts.request_rates {
+                    for out in rates.on_frame(&frame, monitor, hz, sink) {
+                        let _ = vehicle_tx.send(out).await;
                     }
                 }
                 monitor.on_frame(&frame, sink);
@@ -144,6 +161,113 @@ pub async fn run(
     match result {
         Ok(Ok(r)) => r,
         _ => Ok(LiveCounters::default()),
+    }
+}
+
+/// The messages the estimators need, by id: ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU.
+const NEEDED: [(u32, &str); 3] = [(30, "ATTITUDE"), (36, "SERVO_OUTPUT_RAW"), (27, "RAW_IMU")];
+/// How long the achieved rates are counted after the request.
+const RATE_WINDOW: Duration = Duration::from_secs(5);
+
+/// `--request-rates`: one SET_MESSAGE_INTERVAL per needed message to each vehicle's autopilot
+/// after its first heartbeat; then its COMMAND_ACKs and the rates achieved are reported.
+#[derive(Default)]
+struct RateRequests {
+    /// sysid → (when requested, acks seen, frames of each needed message since, reported).
+    asked: BTreeMap<u8, (Instant, u32, [u64; 3], bool)>,
+    seq: u8,
+}
+
+impl RateRequests {
+    fn on_frame(
+        &mut self,
+        frame: &Frame,
+        monitor: &Monitor,
+        hz: f64,
+        sink: &mut dyn PipelineSink,
+    ) -> Vec<Vec<u8>> {
+        use crate::link::dialects::ahcmon::{
+            COMMAND_LONG_DATA, MavAutopilot, MavCmd, MavMessage, MavType,
+        };
+        let mut out = vec![];
+        let sysid = frame.sysid;
+        if let Some((since, acks, counts, reported)) = self.asked.get_mut(&sysid) {
+            if let MavMessage::COMMAND_ACK(a) = &frame.msg
+                && a.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
+            {
+                *acks += 1;
+                sink.message(
+                    sysid,
+                    &format!(
+                        "COMMAND_ACK SET_MESSAGE_INTERVAL {}/3: {:?}",
+                        acks, a.result
+                    ),
+                );
+            }
+            if let Some(k) = NEEDED.iter().position(|(id, _)| *id == frame.msg_id) {
+                counts[k] += 1;
+            }
+            let elapsed = since.elapsed();
+            if !*reported && elapsed >= RATE_WINDOW {
+                *reported = true;
+                let achieved: Vec<String> = NEEDED
+                    .iter()
+                    .zip(counts.iter())
+                    .map(|((_, name), n)| {
+                        format!("{name} {:.1} Hz", *n as f64 / elapsed.as_secs_f64())
+                    })
+                    .collect();
+                sink.message(
+                    sysid,
+                    &format!(
+                        "rates achieved (requested {hz} Hz): {}",
+                        achieved.join(", ")
+                    ),
+                );
+            }
+            return out;
+        }
+        let MavMessage::HEARTBEAT(hb) = &frame.msg else {
+            return out;
+        };
+        if hb.autopilot == MavAutopilot::MAV_AUTOPILOT_INVALID
+            || matches!(
+                hb.mavtype,
+                MavType::MAV_TYPE_GCS | MavType::MAV_TYPE_ONBOARD_CONTROLLER
+            )
+            || !monitor.assembler.vehicles.contains_key(&sysid)
+        {
+            return out;
+        }
+        for (id, _) in NEEDED {
+            let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                param1: id as f32,
+                param2: (1e6 / hz) as f32,
+                command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                target_system: sysid,
+                target_component: frame.compid,
+                ..Default::default()
+            });
+            let mut bytes = Vec::with_capacity(64);
+            // As a component of the vehicle's own system (never as a GCS, sysid 255).
+            crate::link::frame::encode_v2(
+                sysid,
+                crate::output::alerts::ALERT_COMPID,
+                self.seq,
+                &msg,
+                &mut bytes,
+            );
+            self.seq = self.seq.wrapping_add(1);
+            out.push(bytes);
+        }
+        sink.message(
+            sysid,
+            &format!(
+                "requested ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU at {hz} Hz (SET_MESSAGE_INTERVAL)"
+            ),
+        );
+        self.asked.insert(sysid, (Instant::now(), 0, [0; 3], false));
+        out
     }
 }
 
