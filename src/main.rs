@@ -606,7 +606,12 @@ fn monitor(
         drop(ui);
         let counters = counters?;
         if let Some(h) = sim {
-            h.await.context("the simulated vehicle stopped")??;
+            // Quit before the script ended: stop the vehicle; else report how it ended.
+            if h.is_finished() {
+                h.await.context("the simulated vehicle stopped")??;
+            } else {
+                h.abort();
+            }
         }
         anyhow::Ok(counters)
     })?;

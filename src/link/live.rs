@@ -98,6 +98,9 @@ pub async fn run(
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
+    // SIGTERM ends the loop like ctrl-c, so the terminal is restored and the summary printed.
+    #[cfg(unix)]
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).ok();
     loop {
         tokio::select! {
             frame = rx.recv() => {
@@ -151,6 +154,13 @@ pub async fn run(
                 }
             }
             _ = &mut ctrl_c => break,
+            Some(()) = async {
+                #[cfg(unix)]
+                if let Some(t) = term.as_mut() {
+                    return t.recv().await;
+                }
+                std::future::pending::<Option<()>>().await
+            } => break,
         }
     }
     // Closing the channel ends the reader, which hands back its counters.
