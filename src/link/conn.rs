@@ -102,6 +102,20 @@ enum Transport {
     Serial(Box<SerialConn>),
 }
 
+/// Write a frame to a TCP stream; a failed write drops the stream (it is re-made on the next
+/// send or receive). True when written.
+async fn write_or_drop(stream: &mut Option<TcpStream>, frame: &[u8]) -> bool {
+    let Some(s) = stream.as_mut() else {
+        return false;
+    };
+    if s.write_all(frame).await.is_ok() {
+        true
+    } else {
+        *stream = None;
+        false
+    }
+}
+
 /// One live connection: receive frames, send encoded frames.
 pub struct Link {
     pub spec: ConnSpec,
@@ -286,16 +300,7 @@ impl Link {
                     let (s, _) = listener.accept().await.map_err(io)?;
                     *stream = Some(s);
                 }
-                match stream.as_mut().map(|s| s.write_all(frame)) {
-                    Some(w) => match w.await {
-                        Ok(()) => Ok(true),
-                        Err(_) => {
-                            *stream = None;
-                            Ok(false)
-                        }
-                    },
-                    None => Ok(false),
-                }
+                Ok(write_or_drop(stream, frame).await)
             }
             Transport::TcpOut { addr, stream } => {
                 if stream.is_none() {
@@ -307,16 +312,7 @@ impl Link {
                         Err(_) => return Ok(false),
                     }
                 }
-                match stream.as_mut().map(|s| s.write_all(frame)) {
-                    Some(w) => match w.await {
-                        Ok(()) => Ok(true),
-                        Err(_) => {
-                            *stream = None;
-                            Ok(false)
-                        }
-                    },
-                    None => Ok(false),
-                }
+                Ok(write_or_drop(stream, frame).await)
             }
             Transport::Serial(conn) => {
                 use mavlink_core::AsyncMavConnection;

@@ -128,6 +128,14 @@ impl<'a> TruthRecord<'a> {
     }
 }
 
+/// Keep the first write error (later ones are usually its consequence); nothing is dropped
+/// silently: the caller reports it at the end.
+fn keep_first(slot: &mut Option<std::io::Error>, r: std::io::Result<()>) {
+    if let (Err(e), None) = (r, &*slot) {
+        *slot = Some(e);
+    }
+}
+
 /// Decision and estimate files fed by a vehicle run; the first write error is kept and
 /// reported at the end (nothing panics, nothing is silently dropped).
 pub struct RunFiles {
@@ -166,9 +174,7 @@ impl RunFiles {
     }
 
     fn keep(&mut self, r: std::io::Result<()>) {
-        if let (Err(e), None) = (r, &self.error) {
-            self.error = Some(e);
-        }
+        keep_first(&mut self.error, r);
     }
 }
 
@@ -241,9 +247,7 @@ impl MonitorFiles {
     }
 
     fn keep(&mut self, r: std::io::Result<()>) {
-        if let (Err(e), None) = (r, &self.error) {
-            self.error = Some(e);
-        }
+        keep_first(&mut self.error, r);
     }
 }
 
