@@ -156,6 +156,26 @@ impl VehiclePipeline {
         }
     }
 
+    /// While calibrating: seconds of healthy flight collected, and how many are wanted
+    /// (`None` for the target when it ends at `--calibrate-until`).
+    pub fn calibration_progress(&self) -> Option<(f64, Option<f64>)> {
+        match &self.stage {
+            Stage::Calibrating { samples, .. } => {
+                let done = match (samples.first(), samples.last()) {
+                    (Some(a), Some(b)) => b.t - a.t,
+                    _ => 0.0,
+                };
+                let target = self
+                    .cfg
+                    .calibrate_until
+                    .is_none()
+                    .then_some(self.cfg.calibrate_s);
+                Some((done, target))
+            }
+            _ => None,
+        }
+    }
+
     pub fn stage_name(&self) -> &'static str {
         match self.stage {
             Stage::Grounded => "waiting for flight",

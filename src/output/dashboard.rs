@@ -219,7 +219,13 @@ fn actuator_table(
         return;
     };
     let (Some(profile), Some((_, est))) = (p.profile(), &p.last) else {
-        let text = format!("{} …", p.stage_name());
+        let text = match p.calibration_progress() {
+            Some((done, Some(target))) => format!(
+                "calibrating on healthy flight: {done:.1} of {target:.0} s (the model's gains, damping and offsets are identified before any judgement)"
+            ),
+            Some((done, None)) => format!("calibrating on healthy flight: {done:.1} s so far"),
+            None => format!("{} …", p.stage_name()),
+        };
         f.render_widget(Paragraph::new(text).block(block), area);
         return;
     };
