@@ -206,26 +206,50 @@ fn corrupted_real_log_is_counted_and_still_estimated() {
     assert!(lines > 8000, "only {lines} estimate lines");
 }
 
+/// A pymavlink udpin listener (tests/reference/alerts_listener.py) on `port`: started and ready
+/// to receive; `finish` waits for its JSON report of what arrived from component 191.
+struct Listener {
+    child: std::process::Child,
+    out: std::io::BufReader<std::process::ChildStdout>,
+}
+
+impl Listener {
+    fn start(port: u16, timeout_s: u32) -> Self {
+        use std::io::BufRead;
+        let py = common::python();
+        let mut child = Command::new(&py)
+            .args([
+                "tests/reference/alerts_listener.py",
+                &port.to_string(),
+                &timeout_s.to_string(),
+            ])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot run {}: {e}; run `bash .ci/run` once", py.display())
+            });
+        let mut out = std::io::BufReader::new(child.stdout.take().unwrap());
+        let mut line = String::new();
+        out.read_line(&mut line).unwrap();
+        assert_eq!(line.trim(), "ready", "listener did not start");
+        Self { child, out }
+    }
+
+    fn finish(mut self) -> Value {
+        use std::io::BufRead;
+        let mut line = String::new();
+        self.out.read_line(&mut line).unwrap();
+        let _ = self.child.wait();
+        serde_json::from_str(&line).expect("listener JSON")
+    }
+}
+
 #[test]
 fn demo_alerts_reach_a_pymavlink_listener() {
-    use std::io::{BufRead, BufReader};
     let port = free_udp_port();
-    let py = common::python();
-    let mut listener = Command::new(&py)
-        .args([
-            "tests/reference/alerts_listener.py",
-            &port.to_string(),
-            "40",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}; run `bash .ci/run` once", py.display()));
-    let mut out = BufReader::new(listener.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    assert_eq!(line.trim(), "ready", "listener did not start");
+    let listener = Listener::start(port, 40);
     let demo = Command::new(bin())
         .args(["demo", "--headless", "--speed", "4", "--alerts"])
         .arg(format!("udpout:127.0.0.1:{port}"))
@@ -236,10 +260,7 @@ fn demo_alerts_reach_a_pymavlink_listener() {
         "{}",
         String::from_utf8_lossy(&demo.stderr)
     );
-    line.clear();
-    out.read_line(&mut line).unwrap();
-    let _ = listener.wait();
-    let seen: Value = serde_json::from_str(&line).expect("listener JSON");
+    let seen = listener.finish();
     // HEARTBEAT: MAV_TYPE_ONBOARD_CONTROLLER (18), MAV_AUTOPILOT_INVALID (8), as the vehicle's sysid.
     assert!(
         seen["heartbeat"]
@@ -269,32 +290,17 @@ fn demo_alerts_reach_a_pymavlink_listener() {
 
 #[test]
 fn mavproxy_forwards_our_statustext_to_its_outputs() {
-    use std::io::{BufRead, BufReader};
     let py = common::python();
     let mavproxy = py.with_file_name("mavproxy.py");
     assert!(
         mavproxy.exists(),
-        "{} missing: `bash .ci/run` installs MAVProxy from tests/reference/requirements.txt",
+        "{} missing: `bash .ci/run` installs MAVProxy (pip --no-deps mavproxy==1.8.75 pyserial)",
         mavproxy.display()
     );
     let (master, out_port) = (free_udp_port(), free_udp_port());
     let state = common::temp_dir("live_mavproxy");
     // The planner side: a pymavlink listener on MAVProxy's --out.
-    let mut listener = Command::new(&py)
-        .args([
-            "tests/reference/alerts_listener.py",
-            &out_port.to_string(),
-            "60",
-        ])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(listener.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    assert_eq!(line.trim(), "ready");
+    let listener = Listener::start(out_port, 60);
     let mut proxy = Command::new(&py)
         .arg(&mavproxy)
         .arg(format!("--master=udpin:127.0.0.1:{master}"))
@@ -313,9 +319,7 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
         .arg(format!("udpout:127.0.0.1:{master}"))
         .output()
         .unwrap();
-    line.clear();
-    out.read_line(&mut line).unwrap();
-    let _ = listener.wait();
+    let seen = listener.finish();
     let _ = proxy.kill();
     let _ = proxy.wait();
     assert!(
@@ -323,7 +327,6 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
         "{}",
         String::from_utf8_lossy(&demo.stderr)
     );
-    let seen: Value = serde_json::from_str(&line).expect("listener JSON");
     let texts: Vec<&str> = seen["statustext"]
         .as_array()
         .unwrap()

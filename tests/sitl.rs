@@ -33,10 +33,15 @@ impl PipelineSink for Collect {
     }
 }
 
-fn replay(rel: &str, profile: Option<&str>) -> Collect {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+/// A log under replay/tlogs.
+fn tlog(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("replay/tlogs")
-        .join(rel);
+        .join(rel)
+}
+
+fn replay(rel: &str, profile: Option<&str>) -> Collect {
+    let path = tlog(rel);
     let mut r = TlogReader::open(&path).unwrap();
     let mut m = Monitor::new(PipelineConfig {
         profile: profile.map(|p| Profile::resolve(p).unwrap()),
@@ -151,13 +156,9 @@ fn quad_plus_hover_motor1_gain_fault() {
 
 #[test]
 fn calibrate_writes_a_profile_that_replay_uses() {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sitl_calibrate");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::temp_dir("sitl_calibrate");
     let out = dir.join("quadx.toml");
-    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(
-        "replay/tlogs/sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
-    );
+    let log = tlog("sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog");
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
         .arg("calibrate")
         .arg(&log)
@@ -200,13 +201,9 @@ fn calibrate_writes_a_profile_that_replay_uses() {
 
 #[test]
 fn replay_plot_of_the_heli_log_is_valid_svg_with_the_fault_marked() {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sitl_plot");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::temp_dir("sitl_plot");
     let svg = dir.join("heli.svg");
-    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(
-        "replay/tlogs/sitl_heli_maneuvers_servo3_gain0p75/sitl_heli_maneuvers_servo3_gain0p75.tlog",
-    );
+    let log = tlog("sitl_heli_maneuvers_servo3_gain0p75/sitl_heli_maneuvers_servo3_gain0p75.tlog");
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
         .arg("replay")
         .arg(&log)
