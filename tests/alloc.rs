@@ -14,16 +14,30 @@ use std::sync::atomic::{AtomicU64, Ordering};
 struct Counting;
 static ALLOCS: AtomicU64 = AtomicU64::new(0);
 
+thread_local! {
+    /// Set on the thread being measured: the test harness's own threads (printing another
+    /// test's result meanwhile) allocate too, and must not count.
+    static MEASURING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+fn measuring() -> bool {
+    MEASURING.try_with(|m| m.get()).unwrap_or(false)
+}
+
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        if measuring() {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        if measuring() {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
@@ -33,9 +47,12 @@ static GLOBAL: Counting = Counting;
 /// The counter is process-wide: tests that count take this so they do not count each other.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
+/// Heap allocations made by `f` on this thread.
 fn count<F: FnMut()>(mut f: F) -> u64 {
     let before = ALLOCS.load(Ordering::SeqCst);
+    MEASURING.with(|m| m.set(true));
     f();
+    MEASURING.with(|m| m.set(false));
     ALLOCS.load(Ordering::SeqCst) - before
 }
 
