@@ -50,15 +50,20 @@ fn fig5_fault_detected_within_one_second_by_ukf_and_esmf() {
 }
 
 #[test]
-fn fig5_uniform_truth_inside_esmf_bounds_after_the_first_second() {
-    let r = rows("paper-fig5-uniform", 3);
-    for f in ["esmf", "mit-esmf"] {
-        let row = row(&r, f);
-        println!(
-            "{f}: in bounds {:.2} % of all steps, {:.2} % outside the first second",
-            row.truth_in_bounds_pct, row.truth_in_bounds_after_1s_min_pct
-        );
-        assert_eq!(row.truth_in_bounds_after_1s_min_pct, 100.0, "{f}");
+fn fig5_uniform_truth_inside_esmf_bounds() {
+    // Per seed: 100 % of the steps outside the first second after onset, >= 99.9 % of all.
+    let named = scenario::resolve("paper-fig5-uniform").unwrap();
+    for i in 0..3 {
+        let run = run_scenario(&named, named.scenario.seed + i, false).unwrap();
+        for f in run.filters.iter().filter(|f| f.filter.ends_with("esmf")) {
+            let m = &f.metrics;
+            println!(
+                "seed +{i} {}: in bounds {:.2} % of all steps, {:.2} % outside the first second",
+                f.filter, m.truth_in_bounds_pct, m.truth_in_bounds_after_1s_pct
+            );
+            assert_eq!(m.truth_in_bounds_after_1s_pct, 100.0, "{}", f.filter);
+            assert!(m.truth_in_bounds_pct >= 99.9, "{}", f.filter);
+        }
     }
 }
 
@@ -85,4 +90,30 @@ fn mit_ukf_tracks_gamma_after_the_fault() {
         "steady gamma RMSE {}",
         mit.gamma_rmse_steady
     );
+}
+
+#[test]
+fn fig9_mit_esmf_tracks_closer_than_esmf_and_both_detect() {
+    // The MIT-ESMF adapts the AHC process set (its rate entries stay at q0: for measured
+    // coordinates the paper's loss has no minimum). It tracks gamma
+    // with a smaller steady RMSE than the ESMF after the noise step (3 seeds here); both
+    // detect at once.
+    let r = rows("paper-fig9-uniform-step", 3);
+    let (mit, esmf) = (row(&r, "mit-esmf"), row(&r, "esmf"));
+    println!(
+        "steady gamma RMSE: mit-esmf {:.4} esmf {:.4}; detection {:?} {:?}",
+        mit.gamma_rmse_steady,
+        esmf.gamma_rmse_steady,
+        mit.detection_delay_s,
+        esmf.detection_delay_s
+    );
+    assert!(mit.gamma_rmse_steady < esmf.gamma_rmse_steady);
+    for row in [mit, esmf] {
+        assert!(
+            row.detection_delay_s.is_some_and(|d| d <= 1.0),
+            "{}",
+            row.filter
+        );
+        assert_eq!(row.false_decisions, 0, "{}", row.filter);
+    }
 }

@@ -1,7 +1,8 @@
 //! From estimates to decisions (pure). This rule is the simple one the paper implies:
 //! a fault is declared when the healthy point (gamma = 1, delta = 0) has been outside the
 //! filter's bounds for a persistence time, and cleared after it has been back inside for a
-//! hold-off time (hysteresis).
+//! hold-off time (hysteresis). A set filter adds its explicit indication (the paper's
+//! conclusion): a step whose data no state in its set can explain is a fault at once.
 
 pub mod vehicle;
 
@@ -38,13 +39,23 @@ impl BoundsDetector {
         }
     }
 
-    /// Feed one step's bounds of gamma and delta.
+    /// Feed one step's bounds of gamma and delta, and whether the step's data contradicted
+    /// the filter's set (set filters only; always false for the Kalman filters).
     pub fn update(
         &mut self,
         gamma_bounds: (f64, f64),
         delta_bounds: (f64, f64),
+        contradicted: bool,
     ) -> Option<BoundsEvent> {
         self.steps += 1;
+        if contradicted && self.steps > self.warmup_steps {
+            self.inside = 0;
+            if !self.active {
+                self.active = true;
+                return Some(BoundsEvent::Fault);
+            }
+            return None;
+        }
         let healthy_inside = gamma_bounds.0 <= 1.0
             && 1.0 <= gamma_bounds.1
             && delta_bounds.0 <= 0.0
@@ -81,17 +92,21 @@ mod tests {
         let ok = ((0.9, 1.1), (-0.1, 0.1));
         let bad = ((0.4, 0.6), (-0.1, 0.1));
         for _ in 0..4 {
-            assert_eq!(d.update(bad.0, bad.1), None);
+            assert_eq!(d.update(bad.0, bad.1, false), None);
         }
-        assert_eq!(d.update(bad.0, bad.1), Some(BoundsEvent::Fault));
+        assert_eq!(d.update(bad.0, bad.1, false), Some(BoundsEvent::Fault));
         for _ in 0..9 {
-            assert_eq!(d.update(ok.0, ok.1), None);
+            assert_eq!(d.update(ok.0, ok.1, false), None);
         }
-        assert_eq!(d.update(ok.0, ok.1), Some(BoundsEvent::Cleared));
+        assert_eq!(d.update(ok.0, ok.1, false), Some(BoundsEvent::Cleared));
         // A short excursion does not fire.
         for _ in 0..3 {
-            d.update(bad.0, bad.1);
+            d.update(bad.0, bad.1, false);
         }
-        assert_eq!(d.update(ok.0, ok.1), None);
+        assert_eq!(d.update(ok.0, ok.1, false), None);
+        // A contradiction fires at once, even with the healthy point inside the bounds.
+        let mut d = BoundsDetector::new(0.02, 0.1, 0.2, 0.0);
+        assert_eq!(d.update(ok.0, ok.1, true), Some(BoundsEvent::Fault));
+        assert_eq!(d.update(ok.0, ok.1, true), None);
     }
 }

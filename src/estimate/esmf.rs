@@ -22,6 +22,15 @@ pub struct EsmfParams {
     pub max_inflations: u32,
     /// Consecutive inconsistent steps (after all inflations) before the AHC block is reset to P0.
     pub reset_after: u32,
+    /// When the consistency `δ_k` is at or below this, add the *jump set* — the prior set's
+    /// AHC block — to the previous set (Minkowski sum) and redo the step, before any
+    /// inflation: the data say the AHCs have probably left the set, and a fault moves them by
+    /// at most what the prior allows. Without it an abrupt fault can leave the truth outside
+    /// for several steps: the set shrinks (δ small) onto the wrong region without ever being
+    /// contradicted. Default 0.9, from healthy Monte Carlo: over 600 000 healthy steps of the
+    /// paper simulations (uniform and Gaussian noise, 20 seeds) δ never fell below 0.98; the
+    /// first steps after a gamma fault give 0.08–0.6. `-inf` turns the jump off.
+    pub jump_below: f64,
 }
 
 impl Default for EsmfParams {
@@ -31,6 +40,7 @@ impl Default for EsmfParams {
             inflation: 4.0,
             max_inflations: 10,
             reset_after: 25,
+            jump_below: 0.9,
         }
     }
 }
@@ -182,6 +192,33 @@ pub fn scale_block<const N: usize>(p: &mut SMatrix<f64, N, N>, from: usize, s: f
     }
 }
 
+/// `P ← P/(1-β) + J/β`, the trace-optimal outer ellipsoid of `E(0,P) ⊕ E(0,J)`, where `J` is
+/// the diagonal of `p0` on the coordinates `from..N` (zero elsewhere).
+pub fn add_jump_set<const N: usize>(
+    p: &mut SMatrix<f64, N, N>,
+    p0: &SMatrix<f64, N, N>,
+    from: usize,
+) {
+    let tr_j: f64 = (from..N).map(|i| p0[(i, i)].max(0.0)).sum();
+    let tr_p = p.trace().max(0.0);
+    if tr_j <= 0.0 {
+        return;
+    }
+    let beta = tr_j.sqrt() / (tr_j.sqrt() + tr_p.sqrt());
+    *p /= 1.0 - beta;
+    for i in from..N {
+        p[(i, i)] += p0[(i, i)].max(0.0) / beta;
+    }
+}
+
+impl EsmfOutcome {
+    /// The data (nearly) contradicted the predicted set: `δ_k` at or below the jump threshold
+    /// before any jump or inflation.
+    pub fn contradicted(&self) -> bool {
+        self.jumped || self.inflations > 0 || !self.consistent
+    }
+}
+
 /// What one ESMF step did, for diagnosis.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct EsmfOutcome {
@@ -191,6 +228,8 @@ pub struct EsmfOutcome {
     pub consistent: bool,
     /// The AHC block was reset to P0 after a run of inconsistent steps.
     pub reset: bool,
+    /// The jump set was added to the previous set (see [`EsmfParams::jump_below`]).
+    pub jumped: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -341,6 +380,11 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
                 self.r_sqrt_lmax,
                 &e,
             )?;
+            if st.consistency <= self.params.jump_below && !outcome.jumped {
+                add_jump_set(&mut p_prev, &self.p0, ahc);
+                outcome.jumped = true;
+                continue;
+            }
             if st.consistency > self.params.consistency_min {
                 outcome.consistent = true;
                 break;
@@ -409,5 +453,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for Esmf<M
     }
     fn innovation(&self) -> &SVector<f64, M> {
         &self.innovation
+    }
+    fn contradicted(&self) -> bool {
+        self.outcome.contradicted()
     }
 }

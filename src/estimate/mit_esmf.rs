@@ -4,6 +4,13 @@
 //! propagated sensitivity `dP_{k-1}/dq_i` (so the AHC entries adapt; with the one-step
 //! sensitivity their gradient only ever pushes them down). What is held fixed is what the MIT
 //! rule holds fixed: the innovation and the linearisation point (the state estimate).
+//!
+//! Only the AHC entries of q adapt. For a directly measured coordinate the loss has no
+//! minimum: once its predicted extent exceeds the measurement's, `P̄_ii` is capped by the
+//! measurement set while `1 - δ = eᵀW⁻¹e` falls as `1/q_i`, so `J` falls for ever as `q_i`
+//! grows (measured on paper-fig9: rate entries ×540 in 40 s, gamma bounds ±20, no
+//! detection). Holding them at q0 keeps the rate sets honest and leaves the AHC process set,
+//! the part the data cannot give directly, to the adaptation.
 
 use super::esmf::{EsmfOutcome, ShapeStep, remainder_dim, scale_block};
 use super::mit::{AdaptationParams, StepSchedule, log_step};
@@ -128,7 +135,8 @@ pub struct MitEsmf<Mo, const N: usize, const M: usize> {
     pub sensitivity: ShapeSensitivity<N>,
     pub schedule: StepSchedule,
     pub q0: SVector<f64, N>,
-    /// Entries the adaptation leaves at q0 (see `MitUkf::fixed`).
+    /// Entries the adaptation leaves at q0 (see `MitUkf::fixed`); the measured coordinates
+    /// by default (see the module note).
     pub fixed: [bool; N],
     pub gradient: SVector<f64, N>,
     steps: u64,
@@ -144,13 +152,14 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
         q0: SVector<f64, N>,
         r: SMatrix<f64, M, M>,
     ) -> Self {
+        let ahc = model.ahc_start();
         Self {
+            fixed: std::array::from_fn(|i| i < ahc),
             esmf: Esmf::new(model, params, x0, p0, q0, r),
             adapt,
             sensitivity: ShapeSensitivity::new(),
             schedule: StepSchedule::new(),
             q0,
-            fixed: [false; N],
             gradient: SVector::zeros(),
             steps: 0,
         }
@@ -182,7 +191,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
                 scale_block(dp, ahc, s);
             }
         }
-        if !out.consistent || out.reset {
+        // A jump or a reset replaces the set by one the old sensitivities do not describe.
+        if !out.consistent || out.reset || out.jumped {
             self.sensitivity.clear();
             self.gradient = SVector::zeros();
             return Ok(out);
@@ -230,5 +240,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for MitEsm
     }
     fn innovation(&self) -> &SVector<f64, M> {
         &self.esmf.innovation
+    }
+    fn contradicted(&self) -> bool {
+        self.esmf.outcome.contradicted()
     }
 }

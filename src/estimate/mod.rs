@@ -47,6 +47,11 @@ pub trait Estimator<const N: usize, const M: usize> {
     fn process_noise(&self) -> &SVector<f64, N>;
     /// The last innovation `y - h(x⁻)`.
     fn innovation(&self) -> &SVector<f64, M>;
+    /// Set filters: the last step's data contradicted the predicted set (`δ_k ≤ 0` before any
+    /// jump or inflation), the ESMF's explicit fault indication. Kalman filters: always false.
+    fn contradicted(&self) -> bool {
+        false
+    }
 }
 
 pub(crate) fn check_inputs<const M: usize>(

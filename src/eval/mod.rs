@@ -182,7 +182,7 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
                 a.trace.push(s.t, g, gb, d, db);
             }
             let healthy_stretch = onset.is_none_or(|t0| t_step < t0);
-            if let Some(BoundsEvent::Fault) = a.detector.update(gb, db) {
+            if let Some(BoundsEvent::Fault) = a.detector.update(gb, db, f.contradicted()) {
                 a.decisions.push(s.t);
                 if healthy_stretch {
                     a.false_decisions += 1;
@@ -357,10 +357,13 @@ pub fn aggregate(runs: &[Run]) -> Vec<Row> {
                 gamma_rmse_steady: mean(&|m| m.gamma_rmse_steady),
                 delta_rmse_steady: mean(&|m| m.delta_rmse_steady),
                 truth_in_bounds_pct: mean(&|m| m.truth_in_bounds_pct),
+                // NaN (vehicle scenarios do not measure it) stays NaN and prints as "-".
                 truth_in_bounds_after_1s_min_pct: ms
                     .iter()
                     .map(|m| m.truth_in_bounds_after_1s_pct)
-                    .fold(f64::INFINITY, f64::min),
+                    .filter(|v| v.is_finite())
+                    .reduce(f64::min)
+                    .unwrap_or(f64::NAN),
                 false_decisions: ms.iter().map(|m| m.false_decisions).sum(),
                 us_per_step: mean(&|m| m.us_per_step),
                 step_errors: ms.iter().map(|m| m.step_errors).sum(),

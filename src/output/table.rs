@@ -32,7 +32,7 @@ pub fn render(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10.4} {:>10.5} {:>9.2} {:>10.2} {:>6} {:>8.2} {:>4} {:<22}",
+            "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10.4} {:>10.5} {:>9.2} {:>10} {:>6} {:>8.2} {:>4} {:<22}",
             r.scenario,
             r.filter,
             opt(r.detection_delay_s, 2),
@@ -41,7 +41,7 @@ pub fn render(rows: &[Row]) -> String {
             r.gamma_rmse_steady,
             r.delta_rmse_steady,
             r.truth_in_bounds_pct,
-            r.truth_in_bounds_after_1s_min_pct,
+            opt(Some(r.truth_in_bounds_after_1s_min_pct), 2),
             r.false_decisions,
             r.us_per_step,
             match r.isolated_correct {
