@@ -7,7 +7,9 @@
 //! `δ_k ≤ 0` means the data contradict the sets: that is fault evidence, handled by the policy
 //! of estimators.md §3.5 (see [`EsmfParams`]).
 
-use super::linalg::{cholesky_jitter, sym_top_eigen, symmetrize};
+use super::linalg::{
+    cholesky_jitter, identity_tail_start, sandwich_walk, sym_top_eigen, symmetrize,
+};
 use super::{Estimator, EstimatorError, check_inputs};
 use crate::model::{BilinearTerm, Model};
 use nalgebra::{SMatrix, SVector};
@@ -56,8 +58,10 @@ pub struct ShapeStep<const N: usize, const M: usize> {
     pub q_hat: SVector<f64, N>,
     pub nest_beta: f64,
     pub mink_beta: f64,
-    /// `Π = P_{k,k-1}`.
+    /// `Π = P_{k,k-1}`, and its products `H Π`, `H Π Hᵀ` (reused by the MIT-ESMF).
     pub pi: SMatrix<f64, N, N>,
+    pub h_pi: SMatrix<f64, M, N>,
+    pub h_pi_h: SMatrix<f64, M, M>,
     pub rho: f64,
     pub top_lambda: f64,
     pub top_vec: SVector<f64, M>,
@@ -79,6 +83,8 @@ impl<const N: usize, const M: usize> ShapeStep<N, M> {
             nest_beta: 1.0,
             mink_beta: 0.5,
             pi: SMatrix::zeros(),
+            h_pi: SMatrix::zeros(),
+            h_pi_h: SMatrix::zeros(),
             rho: 0.5,
             top_lambda: 0.0,
             top_vec: SVector::zeros(),
@@ -134,7 +140,25 @@ pub fn shape_step<const N: usize, const M: usize>(
     e: &SVector<f64, M>,
 ) -> Result<ShapeStep<N, M>, EstimatorError> {
     let mut st = ShapeStep::zeros();
-    let mut apa = a * p_prev * a.transpose();
+    shape_step_into(&mut st, p_prev, a, q, half_widths, h, r, r_sqrt_lmax, e)?;
+    Ok(st)
+}
+
+/// [`shape_step`] written into `st` (every field is overwritten): the step's several
+/// kilobytes of intermediate matrices are not copied around on the hot path.
+#[allow(clippy::too_many_arguments)]
+pub fn shape_step_into<const N: usize, const M: usize>(
+    st: &mut ShapeStep<N, M>,
+    p_prev: &SMatrix<f64, N, N>,
+    a: &SMatrix<f64, N, N>,
+    q: &SVector<f64, N>,
+    half_widths: &SVector<f64, N>,
+    h: &SMatrix<f64, M, N>,
+    r: &SMatrix<f64, M, M>,
+    r_sqrt_lmax: f64,
+    e: &SVector<f64, M>,
+) -> Result<(), EstimatorError> {
+    let mut apa = sandwich_walk(a, p_prev, identity_tail_start(a));
     symmetrize(&mut apa);
     st.apa = apa;
     st.half_widths = *half_widths;
@@ -159,19 +183,23 @@ pub fn shape_step<const N: usize, const M: usize>(
     }
     st.pi = pi;
     // Paper's rho from the largest eigenvalues of the predicted output set and of R.
-    let (lam, vec) = sym_top_eigen(&(h * pi * h.transpose()));
+    st.h_pi = h * pi;
+    let mut h_pi_h = st.h_pi * h.transpose();
+    symmetrize(&mut h_pi_h);
+    st.h_pi_h = h_pi_h;
+    let (lam, vec) = sym_top_eigen(&h_pi_h);
     st.top_lambda = lam;
     st.top_vec = vec;
     st.rho = r_sqrt_lmax / (lam.max(0.0).sqrt() + r_sqrt_lmax);
     let rho = st.rho;
     st.pi_prime = pi / (1.0 - rho);
-    let mut w = h * st.pi_prime * h.transpose() + r / rho;
+    let mut w = h_pi_h / (1.0 - rho) + r / rho;
     symmetrize(&mut w);
     st.w = w;
     let chol = cholesky_jitter(&w, "esmf W")?;
     st.w_inv_e = chol.solve(e);
     st.consistency = 1.0 - e.dot(&st.w_inv_e);
-    let hpi = h * st.pi_prime;
+    let hpi = st.h_pi / (1.0 - rho);
     st.gain = chol.solve(&hpi).transpose();
     let mut p_bar = st.pi_prime - st.gain * hpi;
     symmetrize(&mut p_bar);
@@ -179,7 +207,7 @@ pub fn shape_step<const N: usize, const M: usize>(
     if !p_bar.iter().all(|v| v.is_finite()) {
         return Err(EstimatorError::NonFinite { what: "ESMF shape" });
     }
-    Ok(st)
+    Ok(())
 }
 
 /// Scale rows and columns `from..N` of `p` by `s` (inflates that block by s²).
@@ -191,6 +219,18 @@ pub fn scale_block<const N: usize>(p: &mut SMatrix<f64, N, N>, from: usize, s: f
         }
     }
 }
+
+/// The box-cut weights rho = k/40, k = 1..39, as (1/rho, 1/(1-rho)).
+const BOX_RHO_GRID: [(f64, f64); 39] = {
+    let mut g = [(0.0, 0.0); 39];
+    let mut k = 0;
+    while k < 39 {
+        let rho = (k + 1) as f64 / 40.0;
+        g[k] = (1.0 / rho, 1.0 / (1.0 - rho));
+        k += 1;
+    }
+    g
+};
 
 /// `P ← P/(1-β) + J/β`, the trace-optimal outer ellipsoid of `E(0,P) ⊕ E(0,J)`, where `J` is
 /// the diagonal of `p0` on the coordinates `from..N` (zero elsewhere).
@@ -317,34 +357,40 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             // every other direction by 1/(1-rho), so P_ii alone is the wrong measure).
             let trace = self.p.trace();
             let col_sq = self.p.column(i).norm_squared();
-            let mut best: Option<(f64, f64)> = None;
-            for k in 1..40 {
-                let rho = k as f64 / 40.0;
-                let a = pii / (1.0 - rho);
-                let b = r * r / rho;
-                let delta = 1.0 - e * e / (a + b);
+            let mut best: Option<(usize, f64)> = None;
+            for (k, (inv_rho, inv_1mr)) in BOX_RHO_GRID.iter().enumerate() {
+                let w = pii * inv_1mr + r * r * inv_rho;
+                let inv_w = 1.0 / w;
+                let delta = 1.0 - e * e * inv_w;
                 if delta <= 0.0 {
                     continue;
                 }
-                let w = a + b;
-                let size = delta * (trace / (1.0 - rho) - col_sq / ((1.0 - rho) * (1.0 - rho) * w));
+                let size = delta * inv_1mr * (trace - col_sq * inv_1mr * inv_w);
                 if best.is_none_or(|(_, s)| size < s) {
-                    best = Some((rho, size));
+                    best = Some((k, size));
                 }
             }
-            let Some((rho, _)) = best else { continue };
-            let pp = self.p / (1.0 - rho);
-            let w = pp[(i, i)] + r * r / rho;
-            let col = pp.column(i).into_owned();
-            let gain = col / w;
+            let Some((k, _)) = best else { continue };
+            let (inv_rho, inv_1mr) = BOX_RHO_GRID[k];
+            // With Π = P/(1-ρ) and w = Π_ii + r²/ρ the update is
+            // δ (Π - Π_i Π_iᵀ / w) = δ/(1-ρ) · (P - P_i P_iᵀ / ((1-ρ) w)): one symmetric rank-1
+            // update in place (exactly symmetric: v_r v_c = v_c v_r).
+            let w = pii * inv_1mr + r * r * inv_rho;
             let delta = 1.0 - e * e / w;
-            let mut p = (pp - gain * col.transpose()) * delta;
-            symmetrize(&mut p);
-            if p.iter().all(|v| v.is_finite()) && p[(i, i)] > 0.0 {
-                self.x += gain * e;
-                self.p = p;
-                self.box_cuts += 1;
+            let alpha = inv_1mr / w;
+            let scale = delta * inv_1mr;
+            let v: SVector<f64, N> = self.p.column(i).into_owned();
+            let new_pii = scale * (pii - alpha * pii * pii);
+            if !(alpha.is_finite() && scale.is_finite() && new_pii > 0.0) {
+                continue;
             }
+            for c in 0..N {
+                for rr in 0..N {
+                    self.p[(rr, c)] = scale * (self.p[(rr, c)] - alpha * v[rr] * v[c]);
+                }
+            }
+            self.x += v * (alpha * e);
+            self.box_cuts += 1;
         }
     }
 
@@ -365,12 +411,15 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         let ahc = self.model.ahc_start();
         let mut p_prev = self.p;
         let mut outcome = EsmfOutcome::default();
-        let (mut st, mut x_prior, mut e);
+        let (mut x_prior, mut e);
+        // The intermediate quantities go straight into `self.last` (no copies of the matrices).
+        let st = &mut self.last;
         loop {
             let (center, half) = remainder_box(self.model.bilinear_terms(), &p_prev);
             x_prior = fx + center;
             e = y - h * x_prior;
-            st = shape_step(
+            shape_step_into(
+                st,
                 &p_prev,
                 &a,
                 &self.process_noise,
@@ -419,7 +468,6 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         }
         self.p = p;
         self.intersect_box();
-        self.last = st;
         self.last_a = a;
         self.h = h;
         self.last_p_prev = p_prev;

@@ -145,7 +145,12 @@ impl<const N: usize> Sensitivity<N> {
     }
 
     pub fn propagate(&mut self, a: &SMatrix<f64, N, N>, forgetting: f64) {
-        for (i, m) in self.m.iter_mut().enumerate() {
+        self.propagate_masked(a, forgetting, &[false; N]);
+    }
+
+    /// [`Sensitivity::propagate`] for the entries not in `skip` (theirs stay as they are).
+    pub fn propagate_masked(&mut self, a: &SMatrix<f64, N, N>, forgetting: f64, skip: &[bool; N]) {
+        for (i, m) in self.m.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
             let mut next = (a * *m * a.transpose()) * forgetting;
             next[(i, i)] += 1.0;
             *m = next;
@@ -162,16 +167,40 @@ impl<const N: usize> Sensitivity<N> {
         d_ahc: &SMatrix<f64, M, M>,
         ahc_start: usize,
     ) -> (SVector<f64, N>, SVector<f64, N>) {
-        let mut g = SVector::<f64, N>::zeros();
-        let mut curv = SVector::<f64, N>::zeros();
-        for i in 0..N {
-            let hmh = h * self.m[i] * h.transpose();
-            let d = if i < ahc_start { d_rates } else { d_ahc };
-            g[i] = -2.0 * d.dot(&hmh);
-            curv[i] = 2.0 * hmh.norm_squared();
-        }
-        (g, curv)
+        let none = [false; N];
+        gradient_from(&self.projected(h, &none), d_rates, d_ahc, ahc_start, &none)
     }
+
+    /// `H M_i Hᵀ` for every entry not in `skip` (zero for those).
+    pub fn projected<const M: usize>(
+        &self,
+        h: &SMatrix<f64, M, N>,
+        skip: &[bool; N],
+    ) -> [SMatrix<f64, M, M>; N] {
+        let mut out = [SMatrix::<f64, M, M>::zeros(); N];
+        for (i, o) in out.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
+            *o = h * self.m[i] * h.transpose();
+        }
+        out
+    }
+}
+
+/// [`Sensitivity::gradient`] from the projected sensitivities `H M_i Hᵀ` (0 for `skip`).
+pub fn gradient_from<const N: usize, const M: usize>(
+    hmh: &[SMatrix<f64, M, M>; N],
+    d_rates: &SMatrix<f64, M, M>,
+    d_ahc: &SMatrix<f64, M, M>,
+    ahc_start: usize,
+    skip: &[bool; N],
+) -> (SVector<f64, N>, SVector<f64, N>) {
+    let mut g = SVector::<f64, N>::zeros();
+    let mut curv = SVector::<f64, N>::zeros();
+    for i in (0..N).filter(|&i| !skip[i]) {
+        let d = if i < ahc_start { d_rates } else { d_ahc };
+        g[i] = -2.0 * d.dot(&hmh[i]);
+        curv[i] = 2.0 * hmh[i].norm_squared();
+    }
+    (g, curv)
 }
 
 /// Robbins–Monro step size with restart on a detected change and a floor for tracking.

@@ -22,6 +22,9 @@ use nalgebra::{SMatrix, SVector};
 #[derive(Debug, Clone)]
 pub struct ShapeSensitivity<const N: usize> {
     pub dp: [SMatrix<f64, N, N>; N],
+    /// Entries whose sensitivity is not needed (q_i held fixed): their gradient is 0 and
+    /// their `dP/dq_i` stays zero, which saves most of the cost when several are fixed.
+    pub skip: [bool; N],
 }
 
 impl<const N: usize> Default for ShapeSensitivity<N> {
@@ -34,6 +37,7 @@ impl<const N: usize> ShapeSensitivity<N> {
     pub fn new() -> Self {
         Self {
             dp: [SMatrix::zeros(); N],
+            skip: [false; N],
         }
     }
 
@@ -64,20 +68,24 @@ impl<const N: usize> ShapeSensitivity<N> {
         let (s1, s2) = (tr_qbar.sqrt(), q.sum().sqrt());
         let (s_hat, t) = (st.q_hat.sum().sqrt(), st.apa.trace().max(0.0).sqrt());
         let (lam_sqrt, w) = (st.top_lambda.max(0.0).sqrt(), st.w_inv_e);
-        let g = SMatrix::<f64, N, N>::identity() - st.gain * h;
+        let walk_from = super::linalg::identity_tail_start(a);
         let krk = st.gain * r * st.gain.transpose();
-        let p = st.p();
-        let tr_p = p.trace();
-        for i in 0..N {
-            let dp_prev = self.dp[i] * forgetting;
-            let mut dapa = a * dp_prev * a.transpose();
-            super::linalg::symmetrize(&mut dapa);
+        let tr_p = st.p_bar.trace() * delta;
+        // Products with H that every i reuses: H Π and H Π Hᵀ.
+        let (h_pi, h_pi_h) = (st.h_pi, st.h_pi_h);
+        let k_t = st.gain.transpose();
+        for i in (0..N).filter(|&i| !self.skip[i]) {
+            // dP_{k-1}/dq_i with forgetting; A (·) Aᵀ is linear, so scale after.
+            let dp_prev = &self.dp[i];
+            // (Not symmetrised here: dP̄ is, at the end.)
+            let dapa = super::linalg::sandwich_walk(a, dp_prev, walk_from) * forgetting;
             // Linearisation-error set: Q̄_rr = d_r b_r², b_r = Σ |c|/2 √(P_jj P_kk).
             let mut db = SVector::<f64, N>::zeros();
             for term in terms {
                 let prod = p_prev[(term.j, term.j)] * p_prev[(term.k, term.k)];
                 if prod > 0.0 {
                     db[term.row] += 0.25
+                        * forgetting
                         * term.coeff.abs()
                         * (dp_prev[(term.j, term.j)] * p_prev[(term.k, term.k)]
                             + p_prev[(term.j, term.j)] * dp_prev[(term.k, term.k)])
@@ -108,17 +116,26 @@ impl<const N: usize> ShapeSensitivity<N> {
             for j in 0..N {
                 dpi[(j, j)] += dq_hat[j] / beta - st.q_hat[j] * dbeta / (beta * beta);
             }
+            let h_dpi = h * dpi;
+            let h_dpi_h = h_dpi * h.transpose();
             // rho through the top eigenvalue of H Π Hᵀ (simple eigenvalue assumed).
-            let dlam = st.top_vec.dot(&(h * dpi * h.transpose() * st.top_vec));
+            let dlam = st.top_vec.dot(&(h_dpi_h * st.top_vec));
             let drho = if lam_sqrt > 0.0 {
                 -r_sqrt_lmax * (dlam / (2.0 * lam_sqrt)) / (r_sqrt_lmax + lam_sqrt).powi(2)
             } else {
                 0.0
             };
-            let dpi_prime = dpi / (1.0 - rho) + st.pi * (drho / (1.0 - rho).powi(2));
-            let dw = h * dpi_prime * h.transpose() - r * (drho / (rho * rho));
+            // dΠ' = dΠ/(1-ρ) + Π dρ/(1-ρ)², and its products with H from the ones above.
+            let (c_pi, c_rho) = (1.0 / (1.0 - rho), drho / (1.0 - rho).powi(2));
+            let dpi_prime = dpi * c_pi + st.pi * c_rho;
+            let h_dpip = h_dpi * c_pi + h_pi * c_rho;
+            let h_dpip_h = h_dpi_h * c_pi + h_pi_h * c_rho;
+            let dw = h_dpip_h - r * (drho / (rho * rho));
             let ddelta = w.dot(&(dw * w));
-            let mut dp_bar = g * dpi_prime * g.transpose() - krk * (drho / (rho * rho));
+            // dP̄ = G dΠ' Gᵀ - K R Kᵀ dρ/ρ², G = I - K H, expanded (see `sandwich_i_minus_kh`).
+            let k_hx = st.gain * h_dpip;
+            let mut dp_bar = dpi_prime - k_hx - k_hx.transpose() + st.gain * (h_dpip_h * k_t)
+                - krk * (drho / (rho * rho));
             super::linalg::symmetrize(&mut dp_bar);
             let dp = st.p_bar * ddelta + dp_bar * delta;
             grad[i] = -ddelta * tr_p + (1.0 - delta) * dp.trace();
@@ -198,6 +215,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
             return Ok(out);
         }
         let e = &self.esmf;
+        self.sensitivity.skip = self.fixed;
         self.gradient = self.sensitivity.gradient_and_propagate(
             &e.last,
             &e.last_p_prev,

@@ -11,7 +11,9 @@
 //! (μ: the windowed innovation mean) and the rate entries `tr[(Ĉ - μμᵀ - (S - S_ahc))²]`.
 //! A noise step moves the spread, a fault the mean. Each gradient is still `-2 tr[D H M_i Hᵀ]`.
 
-use super::mit::{AdaptationParams, InnovationWindow, Sensitivity, StepSchedule, gn_step};
+use super::mit::{
+    AdaptationParams, InnovationWindow, Sensitivity, StepSchedule, gn_step, gradient_from,
+};
 use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
@@ -31,6 +33,10 @@ pub struct MitUkf<Mo, const N: usize, const M: usize, const S: usize> {
     pub fixed: [bool; N],
     /// Last gradient ∂J/∂q (for inspection and tests).
     pub gradient: SVector<f64, N>,
+    /// `Σ q_i M_i` over the fixed entries. Their q_i never change, so the sum obeys the
+    /// sensitivity recursion itself (`λ A S Aᵀ + Σ q_i E_ii`): one propagation instead of one
+    /// per fixed entry. The fixed AHC entries still count in `S_ahc` through it.
+    fixed_sum: SMatrix<f64, N, N>,
     steps: u64,
 }
 
@@ -53,6 +59,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
             q0,
             fixed: [false; N],
             gradient: SVector::zeros(),
+            fixed_sum: SMatrix::zeros(),
             steps: 0,
         }
     }
@@ -69,20 +76,26 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.ukf.try_step(u, y)?;
         self.steps += 1;
         self.window.push(&self.ukf.innovation);
-        self.sensitivity.propagate(&a, self.adapt.forgetting);
+        self.sensitivity
+            .propagate_masked(&a, self.adapt.forgetting, &self.fixed);
+        let ahc = self.ukf.model.ahc_start();
+        let mut next = (a * self.fixed_sum * a.transpose()) * self.adapt.forgetting;
+        for i in (ahc..N).filter(|&i| self.fixed[i]) {
+            next[(i, i)] += self.ukf.process_noise[i];
+        }
+        self.fixed_sum = next;
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
         let h = self.ukf.h;
-        let mut s_ahc = SMatrix::<f64, M, M>::zeros();
-        for i in self.ukf.model.ahc_start()..N {
-            s_ahc += (h * self.sensitivity.m[i] * h.transpose()) * self.ukf.process_noise[i];
+        let hmh = self.sensitivity.projected(&h, &self.fixed);
+        let mut s_ahc = h * self.fixed_sum * h.transpose();
+        for i in (ahc..N).filter(|&i| !self.fixed[i]) {
+            s_ahc += hmh[i] * self.ukf.process_noise[i];
         }
         let mu = self.window.mean();
         let d_ahc = mu * mu.transpose() - s_ahc;
         let d_rates = self.window.centered_covariance() - (self.ukf.s - s_ahc);
-        let (grad, curv) =
-            self.sensitivity
-                .gradient(&h, &d_rates, &d_ahc, self.ukf.model.ahc_start());
+        let (grad, curv) = gradient_from(&hmh, &d_rates, &d_ahc, ahc, &self.fixed);
         self.gradient = grad;
         // Warm-up: no adaptation until the window is full.
         if self.window.is_full() {
