@@ -280,7 +280,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .context("cannot create output file")?;
                 return run_with_files(&named, named.scenario.seed, files, false);
             }
-            eval(scenarios, json, plot, seeds)
+            // On a rayon worker, so each vehicle's two filters step on two cores.
+            rayon::scope(|_| eval(scenarios, json, plot, seeds))
         }
         Command::Sim {
             scenario: name,
@@ -396,7 +397,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             fast: _,
             headless,
             plot,
-        } => replay(&file, &run, speed, plot.as_deref(), headless),
+        } => {
+            // On a rayon worker, so each vehicle's two filters step on two cores.
+            rayon::scope(|_| replay(&file, &run, speed, plot.as_deref(), headless))
+        }
     }
 }
 

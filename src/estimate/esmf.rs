@@ -158,9 +158,8 @@ pub fn shape_step_into<const N: usize, const M: usize>(
     r_sqrt_lmax: f64,
     e: &SVector<f64, M>,
 ) -> Result<(), EstimatorError> {
-    let mut apa = sandwich_walk(a, p_prev, identity_tail_start(a));
-    symmetrize(&mut apa);
-    st.apa = apa;
+    st.apa = sandwich_walk(a, p_prev, identity_tail_start(a));
+    symmetrize(&mut st.apa);
     st.half_widths = *half_widths;
     let d_r = remainder_dim(half_widths);
     st.q_bar = half_widths.map(|b| d_r * b * b);
@@ -174,16 +173,15 @@ pub fn shape_step_into<const N: usize, const M: usize>(
         st.nest_beta = 1.0;
         st.q_hat = *q;
     }
-    let (s, t) = (st.q_hat.sum().sqrt(), apa.trace().max(0.0).sqrt());
+    let (s, t) = (st.q_hat.sum().sqrt(), st.apa.trace().max(0.0).sqrt());
     st.mink_beta = if s + t > 0.0 { s / (s + t) } else { 0.5 };
     let beta = st.mink_beta;
-    let mut pi = apa / (1.0 - beta);
+    st.pi = st.apa / (1.0 - beta);
     for i in 0..N {
-        pi[(i, i)] += st.q_hat[i] / beta;
+        st.pi[(i, i)] += st.q_hat[i] / beta;
     }
-    st.pi = pi;
     // Paper's rho from the largest eigenvalues of the predicted output set and of R.
-    st.h_pi = h * pi;
+    st.h_pi = h * st.pi;
     let mut h_pi_h = st.h_pi * h.transpose();
     symmetrize(&mut h_pi_h);
     st.h_pi_h = h_pi_h;
@@ -192,7 +190,7 @@ pub fn shape_step_into<const N: usize, const M: usize>(
     st.top_vec = vec;
     st.rho = r_sqrt_lmax / (lam.max(0.0).sqrt() + r_sqrt_lmax);
     let rho = st.rho;
-    st.pi_prime = pi / (1.0 - rho);
+    st.pi_prime = st.pi / (1.0 - rho);
     let mut w = h_pi_h / (1.0 - rho) + r / rho;
     symmetrize(&mut w);
     st.w = w;
@@ -201,10 +199,9 @@ pub fn shape_step_into<const N: usize, const M: usize>(
     st.consistency = 1.0 - e.dot(&st.w_inv_e);
     let hpi = st.h_pi / (1.0 - rho);
     st.gain = chol.solve(&hpi).transpose();
-    let mut p_bar = st.pi_prime - st.gain * hpi;
-    symmetrize(&mut p_bar);
-    st.p_bar = p_bar;
-    if !p_bar.iter().all(|v| v.is_finite()) {
+    st.p_bar = st.pi_prime - st.gain * hpi;
+    symmetrize(&mut st.p_bar);
+    if !st.p_bar.iter().all(|v| v.is_finite()) {
         return Err(EstimatorError::NonFinite { what: "ESMF shape" });
     }
     Ok(())
@@ -404,33 +401,36 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         y: &SVector<f64, M>,
     ) -> Result<EsmfOutcome, EstimatorError> {
         check_inputs(self.model.input_dim(), u, y)?;
-        let a = self.model.jacobian(&self.x, u);
+        // Inputs of the step are kept in `self` for the MIT-ESMF; they are built in place
+        // (each N×N copy costs as much as a small product here).
+        self.last_a = self.model.jacobian(&self.x, u);
         let fx = self.model.f(&self.x, u);
-        let h = self.model.h_matrix(u);
+        self.h = self.model.h_matrix(u);
         let y = &(y - self.model.h_offset(u));
         let ahc = self.model.ahc_start();
-        let mut p_prev = self.p;
+        self.last_p_prev = self.p;
         let mut outcome = EsmfOutcome::default();
         let (mut x_prior, mut e);
+        let (a, h, p_prev) = (&self.last_a, &self.h, &mut self.last_p_prev);
         // The intermediate quantities go straight into `self.last` (no copies of the matrices).
         let st = &mut self.last;
         loop {
-            let (center, half) = remainder_box(self.model.bilinear_terms(), &p_prev);
+            let (center, half) = remainder_box(self.model.bilinear_terms(), p_prev);
             x_prior = fx + center;
             e = y - h * x_prior;
             shape_step_into(
                 st,
-                &p_prev,
-                &a,
+                p_prev,
+                a,
                 &self.process_noise,
                 &half,
-                &h,
+                h,
                 &self.r,
                 self.r_sqrt_lmax,
                 &e,
             )?;
             if st.consistency <= self.params.jump_below && !outcome.jumped {
-                add_jump_set(&mut p_prev, &self.p0, ahc);
+                add_jump_set(p_prev, &self.p0, ahc);
                 outcome.jumped = true;
                 continue;
             }
@@ -441,18 +441,19 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             if outcome.inflations >= self.params.max_inflations {
                 break;
             }
-            scale_block(&mut p_prev, ahc, self.params.inflation.sqrt());
+            scale_block(p_prev, ahc, self.params.inflation.sqrt());
             outcome.inflations += 1;
         }
-        let mut p = if outcome.consistent {
+        let p = &mut self.p;
+        if outcome.consistent {
             self.inconsistent_run = 0;
-            st.p()
+            *p = st.p_bar * st.consistency;
         } else {
             self.inconsistent_run += 1;
             self.inconsistent_steps += 1;
-            st.p_bar // δ P̄ would not be positive definite
-        };
-        symmetrize(&mut p);
+            *p = st.p_bar; // δ P̄ would not be positive definite
+        }
+        symmetrize(p);
         self.x = x_prior + st.gain * e;
         if self.inconsistent_run >= self.params.reset_after {
             for i in 0..N {
@@ -466,11 +467,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             self.resets += 1;
             outcome.reset = true;
         }
-        self.p = p;
         self.intersect_box();
-        self.last_a = a;
-        self.h = h;
-        self.last_p_prev = p_prev;
         self.innovation = e;
         self.outcome = outcome;
         Ok(outcome)

@@ -147,24 +147,6 @@ pub fn sandwich_walk<const N: usize>(
     y
 }
 
-/// `(I - K H) X (I - K H)ᵀ` for a symmetric `X`, expanded as
-/// `X - K(HX) - (K(HX))ᵀ + K(HXHᵀ)Kᵀ`: about `3 M N²` products instead of `2 N³`.
-pub fn sandwich_i_minus_kh<const N: usize, const M: usize>(
-    k: &SMatrix<f64, N, M>,
-    h: &SMatrix<f64, M, N>,
-    x: &SMatrix<f64, N, N>,
-) -> SMatrix<f64, N, N> {
-    if N <= SMALL_N {
-        let g = SMatrix::<f64, N, N>::identity() - k * h;
-        return g * x * g.transpose();
-    }
-    let hx = h * x;
-    let hxh = hx * h.transpose();
-    let khx = k * hx;
-    let kc = k * hxh;
-    x - khx - khx.transpose() + kc * k.transpose()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,7 +169,7 @@ mod tests {
     }
 
     #[test]
-    fn structured_sandwiches_match_the_plain_products() {
+    fn structured_sandwich_matches_the_plain_product() {
         let mut a = test_matrix::<7, 7>(0.37);
         for r in 3..7 {
             for c in 0..7 {
@@ -201,11 +183,6 @@ mod tests {
         assert_eq!(identity_tail_start(&SMatrix::<f64, 7, 7>::identity()), 0);
         assert_eq!(identity_tail_start(&x), 7);
         assert!((sandwich_walk(&a, &x, 3) - plain).amax() < 1e-12);
-        let k = test_matrix::<7, 3>(0.53);
-        let h = test_matrix::<3, 7>(0.29);
-        let g = SMatrix::<f64, 7, 7>::identity() - k * h;
-        let plain = g * x * g.transpose();
-        assert!((sandwich_i_minus_kh(&k, &h, &x) - plain).amax() < 1e-12);
     }
 
     #[test]

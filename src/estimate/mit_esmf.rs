@@ -71,14 +71,15 @@ impl<const N: usize> ShapeSensitivity<N> {
         let walk_from = super::linalg::identity_tail_start(a);
         let krk = st.gain * r * st.gain.transpose();
         let tr_p = st.p_bar.trace() * delta;
-        // Products with H that every i reuses: H Π and H Π Hᵀ.
+        // Products every i reuses: H Π, H Π Hᵀ, H AP_{k-1}Aᵀ.
         let (h_pi, h_pi_h) = (st.h_pi, st.h_pi_h);
+        let h_apa = h * st.apa;
         let k_t = st.gain.transpose();
         for i in (0..N).filter(|&i| !self.skip[i]) {
-            // dP_{k-1}/dq_i with forgetting; A (·) Aᵀ is linear, so scale after.
             let dp_prev = &self.dp[i];
-            // (Not symmetrised here: dP̄ is, at the end.)
-            let dapa = super::linalg::sandwich_walk(a, dp_prev, walk_from) * forgetting;
+            // d(A P Aᵀ) = λ A dP_{k-1} Aᵀ (λ: forgetting). The matrix is never formed scaled:
+            // every use below carries λ in its coefficient.
+            let a_dp_a = super::linalg::sandwich_walk(a, dp_prev, walk_from);
             // Linearisation-error set: Q̄_rr = d_r b_r², b_r = Σ |c|/2 √(P_jj P_kk).
             let mut db = SVector::<f64, N>::zeros();
             for term in terms {
@@ -107,16 +108,21 @@ impl<const N: usize> ShapeSensitivity<N> {
             };
             let ds_hat = dq_hat.sum() / (2.0 * s_hat);
             let dt = if t > 0.0 {
-                dapa.trace() / (2.0 * t)
+                forgetting * a_dp_a.trace() / (2.0 * t)
             } else {
                 0.0
             };
             let dbeta = (t * ds_hat - s_hat * dt) / (s_hat + t).powi(2);
-            let mut dpi = dapa / (1.0 - beta) + st.apa * (dbeta / (1.0 - beta).powi(2));
+            // dΠ = c_a·A dP Aᵀ + c_apa·APAᵀ + diag(d_diag).
+            let c_a = forgetting / (1.0 - beta);
+            let c_apa = dbeta / (1.0 - beta).powi(2);
+            let d_diag = dq_hat / beta - st.q_hat * (dbeta / (beta * beta));
+            let mut h_dpi = h * a_dp_a * c_a + h_apa * c_apa;
             for j in 0..N {
-                dpi[(j, j)] += dq_hat[j] / beta - st.q_hat[j] * dbeta / (beta * beta);
+                for m in 0..M {
+                    h_dpi[(m, j)] += h[(m, j)] * d_diag[j];
+                }
             }
-            let h_dpi = h * dpi;
             let h_dpi_h = h_dpi * h.transpose();
             // rho through the top eigenvalue of H Π Hᵀ (simple eigenvalue assumed).
             let dlam = st.top_vec.dot(&(h_dpi_h * st.top_vec));
@@ -127,19 +133,38 @@ impl<const N: usize> ShapeSensitivity<N> {
             };
             // dΠ' = dΠ/(1-ρ) + Π dρ/(1-ρ)², and its products with H from the ones above.
             let (c_pi, c_rho) = (1.0 / (1.0 - rho), drho / (1.0 - rho).powi(2));
-            let dpi_prime = dpi * c_pi + st.pi * c_rho;
             let h_dpip = h_dpi * c_pi + h_pi * c_rho;
             let h_dpip_h = h_dpi_h * c_pi + h_pi_h * c_rho;
             let dw = h_dpip_h - r * (drho / (rho * rho));
             let ddelta = w.dot(&(dw * w));
-            // dP̄ = G dΠ' Gᵀ - K R Kᵀ dρ/ρ², G = I - K H, expanded (see `sandwich_i_minus_kh`).
+            // dP̄ = G dΠ' Gᵀ - K R Kᵀ dρ/ρ², G = I - K H, expanded as
+            // dΠ' - K(H dΠ') - (K(H dΠ'))ᵀ + K(H dΠ' Hᵀ)Kᵀ - K R Kᵀ dρ/ρ²; then
+            // dP = dδ P̄ + δ dP̄, assembled in one pass over the upper triangle and mirrored
+            // (exactly symmetric).
             let k_hx = st.gain * h_dpip;
-            let mut dp_bar = dpi_prime - k_hx - k_hx.transpose() + st.gain * (h_dpip_h * k_t)
-                - krk * (drho / (rho * rho));
-            super::linalg::symmetrize(&mut dp_bar);
-            let dp = st.p_bar * ddelta + dp_bar * delta;
-            grad[i] = -ddelta * tr_p + (1.0 - delta) * dp.trace();
-            self.dp[i] = dp;
+            let kck = st.gain * (h_dpip_h * k_t);
+            let c_krk = drho / (rho * rho);
+            let (ca, capa) = (c_a * c_pi, c_apa * c_pi);
+            let dp = &mut self.dp[i];
+            let mut trace = 0.0;
+            for c in 0..N {
+                for rr in 0..=c {
+                    let mut dpi_prime =
+                        ca * a_dp_a[(rr, c)] + capa * st.apa[(rr, c)] + c_rho * st.pi[(rr, c)];
+                    if rr == c {
+                        dpi_prime += c_pi * d_diag[c];
+                    }
+                    let dp_bar = dpi_prime - k_hx[(rr, c)] - k_hx[(c, rr)] + kck[(rr, c)]
+                        - c_krk * krk[(rr, c)];
+                    let v = ddelta * st.p_bar[(rr, c)] + delta * dp_bar;
+                    dp[(rr, c)] = v;
+                    dp[(c, rr)] = v;
+                    if rr == c {
+                        trace += v;
+                    }
+                }
+            }
+            grad[i] = -ddelta * tr_p + (1.0 - delta) * trace;
         }
         grad
     }

@@ -140,7 +140,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         let mut p = SMatrix::<f64, N, N>::from_diagonal(&self.process_noise);
         for i in 0..S {
             let d = self.sigmas_f[i] - x;
-            p += (d * d.transpose()) * self.wc[i];
+            p.ger(self.wc[i], &d, &d, 1.0); // in place: no N×N temporaries
         }
         symmetrize(&mut p);
         self.x_prior = x;
@@ -163,8 +163,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         for ((yi, sigma), wc) in ys.iter().zip(&self.sigmas).zip(&self.wc) {
             let dy = yi - y_pred;
             let dx = sigma - self.x;
-            s += (dy * dy.transpose()) * *wc;
-            pxy += (dx * dy.transpose()) * *wc;
+            s.ger(*wc, &dy, &dy, 1.0);
+            pxy.ger(*wc, &dx, &dy, 1.0);
         }
         symmetrize(&mut s);
         let s_chol = cholesky_jitter(&s, "innovation covariance")?;

@@ -264,10 +264,17 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             return [Err(e.clone()), Err(e)];
         }
         let y = SVector::<f64, M>::from_column_slice(y);
-        [
-            self.ukf.try_step(u, &y),
-            self.esmf.try_step(u, &y).map(|_| ()),
-        ]
+        let (ukf, esmf) = (&mut self.ukf, &mut self.esmf);
+        // The two filters are independent: inside a rayon pool (replay, eval) they run on two
+        // cores; the calling thread takes the (heavier) set filter, so the other core has the
+        // time it needs to pick up the UKF. Outside one (the live monitor at 50 Hz) handing
+        // the work to the pool would cost more than it saves, so they run in turn.
+        if rayon::current_thread_index().is_some() {
+            let (b, a) = rayon::join(|| esmf.try_step(u, &y).map(|_| ()), || ukf.try_step(u, &y));
+            [a, b]
+        } else {
+            [ukf.try_step(u, &y), esmf.try_step(u, &y).map(|_| ())]
+        }
     }
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate {
         let l = self.actuators();
