@@ -3,7 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 py=.venv/bin/python; [ -x "$py" ] || py=python3
-cargo bench --bench filters -- --noplot 2>&1 | tee target/bench.txt | grep -E "^step/|^paper-run|time:"
+cargo bench --bench filters -- --noplot 2>&1 | tee target/bench.txt | grep -E "^step/|^paper-run|^vehicle-step|time:"
 fp=$("$py" benches/filterpy_ukf_timing.py | awk '{print $(NF-1)}')
 echo "filterpy UKF step (n=5): ${fp} us"
 for f in ukf mit-ukf mit-esmf; do
