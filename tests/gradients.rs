@@ -2,7 +2,8 @@
 //! sensitivity over 50 steps, for every q_i including the AHC entries.
 
 use ahcmon::estimate::{
-    Esmf, EsmfParams, Sensitivity, ShapeSensitivity, Ukf, UkfParams, remainder_box, shape_step,
+    Esmf, EsmfParams, Sensitivity, ShapeSensitivity, ShapeStep, Ukf, UkfParams, remainder_box,
+    shape_step,
 };
 use ahcmon::eval::bank::{BankNoise, kalman_p0, set_p0, x0};
 use ahcmon::model::{Model, PaperHeli, PaperHeliParams};
@@ -236,7 +237,8 @@ fn mit_esmf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
         let mut j = 0.0;
         for (a, e) in &rec {
             let (_, half) = remainder_box(m.bilinear_terms(), &p);
-            let st = shape_step(&p, a, q, &half, &h, &r, rl, e).unwrap();
+            let mut st = ShapeStep::zeros();
+            shape_step(&mut st, &p, a, q, &half, &h, &r, rl, e).unwrap();
             assert!(st.consistency > 0.0);
             if let Some(s) = sens.as_deref_mut() {
                 g = s.gradient_and_propagate(&st, &p, a, m.bilinear_terms(), &h, &r, rl, q, 1.0);

@@ -126,28 +126,12 @@ pub fn remainder_dim<const N: usize>(half: &SVector<f64, N>) -> f64 {
     half.iter().filter(|b| **b > 0.0).count() as f64
 }
 
-/// One ESMF shape update (pure): previous shape `p_prev`, linearisation `a`, process set
-/// diag `q`, remainder half-widths, measurement matrix `h` and set `r`, innovation `e`.
+/// One ESMF shape update (pure), written into `st` (every field is overwritten, so the
+/// step's kilobytes of intermediate matrices are not copied around on the hot path): previous
+/// shape `p_prev`, linearisation `a`, process set diag `q`, remainder half-widths,
+/// measurement matrix `h` and set `r`, innovation `e`.
 #[allow(clippy::too_many_arguments)]
 pub fn shape_step<const N: usize, const M: usize>(
-    p_prev: &SMatrix<f64, N, N>,
-    a: &SMatrix<f64, N, N>,
-    q: &SVector<f64, N>,
-    half_widths: &SVector<f64, N>,
-    h: &SMatrix<f64, M, N>,
-    r: &SMatrix<f64, M, M>,
-    r_sqrt_lmax: f64,
-    e: &SVector<f64, M>,
-) -> Result<ShapeStep<N, M>, EstimatorError> {
-    let mut st = ShapeStep::zeros();
-    shape_step_into(&mut st, p_prev, a, q, half_widths, h, r, r_sqrt_lmax, e)?;
-    Ok(st)
-}
-
-/// [`shape_step`] written into `st` (every field is overwritten): the step's several
-/// kilobytes of intermediate matrices are not copied around on the hot path.
-#[allow(clippy::too_many_arguments)]
-pub fn shape_step_into<const N: usize, const M: usize>(
     st: &mut ShapeStep<N, M>,
     p_prev: &SMatrix<f64, N, N>,
     a: &SMatrix<f64, N, N>,
@@ -418,7 +402,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             let (center, half) = remainder_box(self.model.bilinear_terms(), p_prev);
             x_prior = fx + center;
             e = y - h * x_prior;
-            shape_step_into(
+            shape_step(
                 st,
                 p_prev,
                 a,
