@@ -243,6 +243,11 @@ fn is_input_error(e: &anyhow::Error) -> bool {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // replay and eval run on this pool (two filters of a vehicle on two cores): give its
+    // workers the main thread's stack size, the filter structs are moved by value.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .stack_size(8 << 20)
+        .build_global();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -55,7 +55,13 @@ fn fig5_uniform_truth_inside_esmf_bounds() {
     let named = scenario::resolve("paper-fig5-uniform").unwrap();
     for i in 0..3 {
         let run = run_scenario(&named, named.scenario.seed + i, false).unwrap();
-        for f in run.filters.iter().filter(|f| f.filter.ends_with("esmf")) {
+        let set_filters: Vec<_> = run
+            .filters
+            .iter()
+            .filter(|f| f.filter.ends_with("esmf"))
+            .collect();
+        assert_eq!(set_filters.len(), 2, "esmf and mit-esmf");
+        for f in set_filters {
             let m = &f.metrics;
             println!(
                 "seed +{i} {}: in bounds {:.2} % of all steps, {:.2} % outside the first second",

@@ -225,6 +225,14 @@ pub fn add_jump_set<const N: usize>(
     if tr_j <= 0.0 {
         return;
     }
+    if tr_p <= 0.0 {
+        // A degenerate (point) set: the sum is the jump set itself.
+        *p = SMatrix::zeros();
+        for i in from..N {
+            p[(i, i)] = p0[(i, i)].max(0.0);
+        }
+        return;
+    }
     let beta = tr_j.sqrt() / (tr_j.sqrt() + tr_p.sqrt());
     *p /= 1.0 - beta;
     for i in from..N {
@@ -355,7 +363,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             let (inv_rho, inv_1mr) = BOX_RHO_GRID[k];
             // With Π = P/(1-ρ) and w = Π_ii + r²/ρ the update is
             // δ (Π - Π_i Π_iᵀ / w) = δ/(1-ρ) · (P - P_i P_iᵀ / ((1-ρ) w)): one symmetric rank-1
-            // update in place (exactly symmetric: v_r v_c = v_c v_r).
+            // update in place, upper triangle mirrored (exactly symmetric).
             let w = pii * inv_1mr + r * r * inv_rho;
             let delta = 1.0 - e * e / w;
             let alpha = inv_1mr / w;
@@ -366,8 +374,10 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
                 continue;
             }
             for c in 0..N {
-                for rr in 0..N {
-                    self.p[(rr, c)] = scale * (self.p[(rr, c)] - alpha * v[rr] * v[c]);
+                for rr in 0..=c {
+                    let value = scale * (self.p[(rr, c)] - alpha * v[rr] * v[c]);
+                    self.p[(rr, c)] = value;
+                    self.p[(c, rr)] = value;
                 }
             }
             self.x += v * (alpha * e);

@@ -215,7 +215,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
         let out = self.esmf.try_step(u, y)?;
         self.steps += 1;
         // The schedule's change detector: 1 - δ is the set analogue of a normalised innovation.
-        let nis_like = if out.consistent {
+        // A jumped step was (nearly) contradicted before the jump made it consistent: count it
+        // as change evidence like an inconsistent one.
+        let nis_like = if out.consistent && !out.jumped {
             (1.0 - self.esmf.last.consistency) * M as f64
         } else {
             4.0 * M as f64

@@ -47,8 +47,10 @@ pub trait Estimator<const N: usize, const M: usize> {
     fn process_noise(&self) -> &SVector<f64, N>;
     /// The last innovation `y - h(x⁻)`.
     fn innovation(&self) -> &SVector<f64, M>;
-    /// Set filters: the last step's data contradicted the predicted set (`δ_k ≤ 0` before any
-    /// jump or inflation), the ESMF's explicit fault indication. Kalman filters: always false.
+    /// Set filters: the last step's data (nearly) contradicted the predicted set — its
+    /// consistency `δ_k` was at or below the jump threshold (0.9 by default; ≤ 0 is an outright
+    /// contradiction) before any jump or inflation: the ESMF's explicit fault indication.
+    /// Kalman filters: always false.
     fn contradicted(&self) -> bool {
         false
     }
