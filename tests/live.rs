@@ -398,3 +398,84 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
         "{stderr}"
     );
 }
+
+/// The serial transport through a real pseudo-terminal (tests/reference/serial_feeder.py writes
+/// a simulated flight's frames in raw mode, some corrupted, some garbage): frames are framed by
+/// our own framer, so bad CRCs and resyncs on a radio link are counted like on UDP.
+#[test]
+fn serial_link_frames_and_counts_what_it_drops() {
+    use std::io::BufRead;
+    let dir = common::temp_dir("live_serial");
+    let tlog = dir.join("sim.tlog");
+    let sim = Command::new(bin())
+        .args(["sim", "--scenario", "quad-x-motor2-loe-live", "--tlog"])
+        .arg(&tlog)
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let mut feeder = Command::new(common::python())
+        .arg("tests/reference/serial_feeder.py")
+        .arg(&tlog)
+        .arg("3000")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("python with pymavlink (bash .ci/run creates .venv)");
+    let mut out = std::io::BufReader::new(feeder.stdout.take().unwrap());
+    let mut device = String::new();
+    out.read_line(&mut device).unwrap();
+    let device = device.trim().to_string();
+    assert!(device.starts_with("/dev/"), "feeder said {device:?}");
+    let monitor = Command::new(bin())
+        .args(["monitor", &format!("serial:{device}:57600"), "--headless"])
+        .args(["--exit-idle", "2"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut report = String::new();
+    out.read_line(&mut report).unwrap();
+    let report: Value = serde_json::from_str(&report).unwrap();
+    let result = monitor.wait_with_output().unwrap();
+    let _ = feeder.kill();
+    let _ = feeder.wait();
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let summary = String::from_utf8_lossy(&result.stdout);
+    let link = summary
+        .lines()
+        .find(|l| l.starts_with("link: "))
+        .unwrap_or_else(|| panic!("no link line in {summary}"));
+    let count = |key: &str| -> u64 {
+        let at = link
+            .find(key)
+            .unwrap_or_else(|| panic!("{key} missing in {link}"));
+        link[at + key.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let (sent, corrupted) = (
+        report["frames"].as_u64().unwrap(),
+        report["corrupted"].as_u64().unwrap(),
+    );
+    println!("feeder {report}; monitor {link}");
+    // Each corrupted frame is one bad CRC; the 300 garbage bytes can add a few more (a 0xFD/0xFE
+    // in them looks like a frame start).
+    assert!(
+        (corrupted..=corrupted + 5).contains(&count("bad_crc ")),
+        "{link}"
+    );
+    assert!(count("resync ") > 0, "{link}");
+    // Every good frame arrives; the garbage may hide at most the frame it runs into.
+    let good = sent - corrupted;
+    assert!(
+        count("frames ") + 1 >= good && count("frames ") <= good,
+        "{link}"
+    );
+}

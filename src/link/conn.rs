@@ -80,10 +80,6 @@ impl std::fmt::Display for ConnSpec {
     }
 }
 
-type SerialConn = mavlink_core::AsyncDialectConnection<
-    mavlink_core::static_dialect::StaticDialect<super::MavMessage>,
->;
-
 enum Transport {
     Udp {
         sock: UdpSocket,
@@ -99,7 +95,9 @@ enum Transport {
         addr: SocketAddr,
         stream: Option<TcpStream>,
     },
-    Serial(Box<SerialConn>),
+    /// Read as a byte stream through our own framer, like TCP, so that bad CRCs, resyncs
+    /// and unknown ids on a radio link are counted too.
+    Serial(Box<tokio_serial::SerialStream>),
 }
 
 /// Write a frame to a TCP stream; a failed write drops the stream (it is re-made on the next
@@ -168,14 +166,11 @@ impl Link {
                 stream: TcpStream::connect(a).await.ok(),
             },
             ConnSpec::Serial(dev, baud) => {
-                use mavlink_core::AsyncMavConnection;
-                let mut conn = mavlink_core::connect_async::<super::MavMessage>(&format!(
-                    "serial:{dev}:{baud}"
-                ))
-                .await
-                .map_err(io)?;
-                conn.set_allow_recv_any_version(true);
-                Transport::Serial(Box::new(conn))
+                use tokio_serial::SerialPortBuilderExt;
+                let port = tokio_serial::new(dev.as_str(), *baud)
+                    .open_native_async()
+                    .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+                Transport::Serial(Box::new(port))
             }
         };
         Ok(Self {
@@ -255,24 +250,15 @@ impl Link {
                         Ok(n) => self.framer.push(&self.buf[..n]),
                     },
                 },
-                Transport::Serial(conn) => {
-                    use mavlink_core::AsyncMavConnection;
-                    // The crate frames serial itself (no drop counts available there).
-                    let raw = conn
-                        .recv_raw()
-                        .await
-                        .map_err(|e| io(&self.spec, std::io::Error::other(e.to_string())))?;
-                    let mut bytes = Vec::with_capacity(super::frame::MAX_FRAME);
-                    match raw {
-                        mavlink_core::MAVLinkMessageRaw::V1(m) => {
-                            bytes.extend_from_slice(m.raw_bytes())
-                        }
-                        mavlink_core::MAVLinkMessageRaw::V2(m) => {
-                            bytes.extend_from_slice(m.raw_bytes())
-                        }
+                Transport::Serial(port) => match port.read(&mut self.buf).await {
+                    Ok(0) => {
+                        // A closed device (USB radio unplugged): wait and let the caller's
+                        // link-loss timer report it, rather than spinning.
+                        tokio::time::sleep(Duration::from_millis(100)).await;
                     }
-                    self.framer.push(&bytes);
-                }
+                    Ok(n) => self.framer.push(&self.buf[..n]),
+                    Err(e) => return Err(io(&self.spec, e)),
+                },
             }
         }
     }
@@ -314,23 +300,9 @@ impl Link {
                 }
                 Ok(write_or_drop(stream, frame).await)
             }
-            Transport::Serial(conn) => {
-                use mavlink_core::AsyncMavConnection;
-                // Re-parse our own bytes into a message for the crate's writer.
-                match super::frame::parse(frame) {
-                    super::frame::Parsed::Frame(f, _) => {
-                        let header = mavlink_core::MavHeader {
-                            system_id: f.sysid.into(),
-                            component_id: f.compid,
-                            sequence: f.seq,
-                        };
-                        conn.send(&header, &f.msg)
-                            .await
-                            .map_err(|e| io(std::io::Error::other(e.to_string())))?;
-                        Ok(true)
-                    }
-                    _ => Ok(false),
-                }
+            Transport::Serial(port) => {
+                port.write_all(frame).await.map_err(io)?;
+                Ok(true)
             }
         }
     }
