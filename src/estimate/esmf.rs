@@ -389,6 +389,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         self.r_sqrt_lmax
     }
 
+    /// One step. On error the set (`x`, `p`) is left as it was; the step's record (`last`,
+    /// `last_a`, `h`, `last_p_prev`) may describe the failed attempt, which no caller reads
+    /// (the MIT-ESMF returns at once, the monitor resets the filter).
     pub fn try_step(
         &mut self,
         u: &[f64],
