@@ -126,3 +126,29 @@ fn remainder_box_is_the_exact_range_of_the_bilinear_terms() {
         );
     }
 }
+
+#[test]
+fn bounds_are_clipped_to_the_a_priori_box() {
+    let n = BankNoise::nominal(
+        &NoiseSchedule::constant(NoiseKind::Uniform, 0.03),
+        &NoiseSchedule::constant(NoiseKind::Uniform, 0.025),
+    );
+    let m = PaperHeli::new(paper_params(10.0), 0.02);
+    let mut f = Esmf::new(
+        m,
+        EsmfParams::default(),
+        x0(),
+        set_p0(),
+        n.set_q(),
+        n.set_r(),
+    );
+    f.p[(3, 3)] = 25.0; // gamma ± 5
+    assert_eq!(f.projection(3), (-4.0, 6.0));
+    f.box_centre[3] = 1.0;
+    f.box_half[3] = 2.0;
+    assert_eq!(f.projection(3), (-1.0, 3.0));
+    // A set that has left the box (inconsistent prior): its own projection is kept.
+    f.x[3] = 9.0;
+    f.p[(3, 3)] = 1.0;
+    assert_eq!(f.projection(3), (8.0, 10.0));
+}

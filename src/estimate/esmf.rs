@@ -470,10 +470,18 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         Ok(outcome)
     }
 
-    /// Projection of the set on coordinate `i`: `x_i ± √P_ii` (exact support function).
+    /// Bounds of coordinate `i`: the set's projection `x_i ± √P_ii` (exact support function),
+    /// clipped to the a priori box where there is one. The truth lies in both; the box cuts
+    /// keep the set near the box but, being outer ellipsoids, not inside it.
     pub fn projection(&self, i: usize) -> (f64, f64) {
         let s = self.p[(i, i)].max(0.0).sqrt();
-        (self.x[i] - s, self.x[i] + s)
+        let (lo, hi) = (self.x[i] - s, self.x[i] + s);
+        let (c, r) = (self.box_centre[i], self.box_half[i]);
+        if r.is_finite() && lo.max(c - r) <= hi.min(c + r) {
+            (lo.max(c - r), hi.min(c + r))
+        } else {
+            (lo, hi)
+        }
     }
 }
 
