@@ -127,28 +127,10 @@ fn paper_run(c: &mut Criterion) {
 /// Quad X with a_z: n = 11, m = 4 (DESIGN.md target: ≤ 10 µs per step per filter).
 fn vehicle_steps(c: &mut Criterion) {
     use ahcmon::estimate::vehicle::{FilterPair, FilterSetup};
-    use ahcmon::sim::vehicle::{AttitudeDither, ModelMismatch, VehicleSim, VehicleSimConfig};
+    use ahcmon::sim::vehicle::{VehicleSim, VehicleSimConfig};
     use ahcmon::telemetry::Profile;
     let profile = Profile::resolve("quad-x").unwrap();
-    let mut sim = VehicleSim::new(VehicleSimConfig {
-        dt: 0.02,
-        profile: profile.clone(),
-        mismatch: ModelMismatch {
-            damping: 1.0,
-            effectiveness: 1.0,
-        },
-        gusts: None,
-        dither: Some(AttitudeDither {
-            amplitude: [0.05, 0.05, 0.1],
-            freqs_hz: vec![0.3, 0.7, 1.1],
-        }),
-        manoeuvres: vec![],
-        faults: vec![],
-        gyro_noise: 0.003,
-        az_noise: 0.3,
-        seed: 1,
-    })
-    .unwrap();
+    let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 1)).unwrap();
     let data: Vec<_> = (0..2000).map(|_| sim.step()).collect();
     let setup = FilterSetup::<11, 4>::from_profile(&profile, 0.02).unwrap();
     let mut g = c.benchmark_group("vehicle-step-n11");

@@ -320,28 +320,10 @@ fn ahc_process_noise_moves_after_a_fault() {
 #[test]
 fn mit_esmf_recursive_sensitivity_on_the_quad_model_matches_finite_differences() {
     use ahcmon::estimate::vehicle::FilterSetup;
-    use ahcmon::sim::vehicle::{AttitudeDither, ModelMismatch, VehicleSim, VehicleSimConfig};
+    use ahcmon::sim::vehicle::{VehicleSim, VehicleSimConfig};
     use ahcmon::telemetry::Profile;
     let profile = Profile::resolve("quad-x").unwrap();
-    let mut sim = VehicleSim::new(VehicleSimConfig {
-        dt: 0.02,
-        profile: profile.clone(),
-        mismatch: ModelMismatch {
-            damping: 1.0,
-            effectiveness: 1.0,
-        },
-        gusts: None,
-        dither: Some(AttitudeDither {
-            amplitude: [0.05, 0.05, 0.1],
-            freqs_hz: vec![0.3, 0.7, 1.1],
-        }),
-        manoeuvres: vec![],
-        faults: vec![],
-        gyro_noise: 0.003,
-        az_noise: 0.3,
-        seed: 3,
-    })
-    .unwrap();
+    let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 3)).unwrap();
     let setup = FilterSetup::<11, 4>::from_profile(&profile, 0.02).unwrap();
     let mut f = Esmf::new(
         setup.model,

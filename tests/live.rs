@@ -25,6 +25,31 @@ fn decisions(path: &Path) -> Vec<Value> {
         .collect()
 }
 
+/// The number after `key` in the summary's `link: ` line.
+fn link_count(link: &str, key: &str) -> u64 {
+    let at = link
+        .find(key)
+        .unwrap_or_else(|| panic!("{key} missing in {link}"));
+    link[at + key.len()..]
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+/// A tlog of the simulated quad (`sim --tlog`) in `dir`, and what the simulator printed.
+fn sim_quad_tlog(dir: &Path) -> (std::path::PathBuf, String) {
+    let tlog = dir.join("quad.tlog");
+    let out = Command::new(bin())
+        .args(["sim", "--scenario", "quad-x-motor2-loe-live", "--tlog"])
+        .arg(&tlog)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    (tlog, String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
 fn faults(ds: &[Value], sysid: u64) -> Vec<&Value> {
     ds.iter()
         .filter(|d| d["sysid"] == sysid && (d["event"] == "fault" || d["event"] == "changed"))
@@ -118,13 +143,7 @@ fn two_vehicles_at_once_keep_their_own_decisions() {
 #[test]
 fn sim_tlog_loads_in_pymavlink_with_the_same_counts() {
     let dir = common::temp_dir("live_tlog");
-    let tlog = dir.join("quad.tlog");
-    let out = Command::new(bin())
-        .args(["sim", "--scenario", "quad-x-motor2-loe-live", "--tlog"])
-        .arg(&tlog)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    let (tlog, said) = sim_quad_tlog(&dir);
     // Our own reader's per-type counts ...
     let mut ours = std::collections::BTreeMap::new();
     let mut r = ahcmon::link::TlogReader::open(&tlog).unwrap();
@@ -135,7 +154,6 @@ fn sim_tlog_loads_in_pymavlink_with_the_same_counts() {
     }
     assert_eq!(r.counters.dropped(), 0);
     // ... the sim's own report ...
-    let said = String::from_utf8_lossy(&out.stdout);
     for (name, n) in &ours {
         assert!(said.contains(&format!("{name} {n}")), "{said}");
     }
@@ -188,17 +206,7 @@ fn corrupted_real_log_is_counted_and_still_estimated() {
     );
     let summary = String::from_utf8_lossy(&out.stdout);
     let link = summary.lines().find(|l| l.starts_with("link: ")).unwrap();
-    let count = |key: &str| -> u64 {
-        let at = link
-            .find(key)
-            .unwrap_or_else(|| panic!("{key} missing in {link}"));
-        link[at + key.len()..]
-            .split_whitespace()
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let count = |key: &str| link_count(link, key);
     assert!(count("resync ") > 0, "{link}");
     assert!(count("bad_crc ") > 0, "{link}");
     assert!(count("frames ") > 41_000, "{link}");
@@ -406,13 +414,7 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
 fn serial_link_frames_and_counts_what_it_drops() {
     use std::io::BufRead;
     let dir = common::temp_dir("live_serial");
-    let tlog = dir.join("sim.tlog");
-    let sim = Command::new(bin())
-        .args(["sim", "--scenario", "quad-x-motor2-loe-live", "--tlog"])
-        .arg(&tlog)
-        .output()
-        .unwrap();
-    assert!(sim.status.success());
+    let (tlog, _) = sim_quad_tlog(&dir);
     let mut feeder = Command::new(common::python())
         .arg("tests/reference/serial_feeder.py")
         .arg(&tlog)
@@ -449,17 +451,7 @@ fn serial_link_frames_and_counts_what_it_drops() {
         .lines()
         .find(|l| l.starts_with("link: "))
         .unwrap_or_else(|| panic!("no link line in {summary}"));
-    let count = |key: &str| -> u64 {
-        let at = link
-            .find(key)
-            .unwrap_or_else(|| panic!("{key} missing in {link}"));
-        link[at + key.len()..]
-            .split_whitespace()
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let count = |key: &str| link_count(link, key);
     let (sent, corrupted) = (
         report["frames"].as_u64().unwrap(),
         report["corrupted"].as_u64().unwrap(),

@@ -5,7 +5,7 @@ mod common;
 use ahcmon::eval::run_scenario;
 use ahcmon::model::calibrate::{CalibrationSample, calibrate};
 use ahcmon::scenario::resolve;
-use ahcmon::sim::vehicle::{AttitudeDither, ModelMismatch, VehicleSim, VehicleSimConfig};
+use ahcmon::sim::vehicle::{ModelMismatch, VehicleSim, VehicleSimConfig};
 use ahcmon::telemetry::Profile;
 use std::process::Command;
 
@@ -75,23 +75,12 @@ fn calibration_recovers_damping_and_effectiveness() {
         let truth = profile
             .rate_params()
             .scaled(mismatch.damping, mismatch.effectiveness);
+        // Calm air: a gust the controller reacts to is a disturbance correlated with the
+        // commands, which biases any closed-loop least-squares fit (measured: plane roll
+        // damping -12 % under 0.3 rad/s² gusts). Calibrate on a calm stretch.
         let cfg = VehicleSimConfig {
-            dt: 0.02,
-            profile: profile.clone(),
             mismatch,
-            // Calm air: a gust the controller reacts to is a disturbance correlated with the
-            // commands, which biases any closed-loop least-squares fit (measured: plane roll
-            // damping -12 % under 0.3 rad/s² gusts). Calibrate on a calm stretch.
-            gusts: None,
-            dither: Some(AttitudeDither {
-                amplitude: [0.05, 0.05, 0.1],
-                freqs_hz: vec![0.3, 0.7, 1.1],
-            }),
-            manoeuvres: vec![],
-            faults: vec![],
-            gyro_noise: 0.003,
-            az_noise: 0.3,
-            seed: 5,
+            ..VehicleSimConfig::calm(profile.clone(), 0.02, 5)
         };
         let mut sim = VehicleSim::new(cfg).unwrap();
         let l = profile.actuators.len();

@@ -106,6 +106,31 @@ pub struct VehicleSimConfig {
     pub seed: u64,
 }
 
+impl VehicleSimConfig {
+    /// A calm, exact-model flight with the standard attitude dither (0.05/0.05/0.1 rad at
+    /// 0.3/0.7/1.1 Hz) and typical sensor noise: what benchmarks and calibration checks fly.
+    pub fn calm(profile: Profile, dt: f64, seed: u64) -> Self {
+        Self {
+            profile,
+            dt,
+            mismatch: ModelMismatch {
+                damping: 1.0,
+                effectiveness: 1.0,
+            },
+            gusts: None,
+            dither: Some(AttitudeDither {
+                amplitude: [0.05, 0.05, 0.1],
+                freqs_hz: vec![0.3, 0.7, 1.1],
+            }),
+            manoeuvres: vec![],
+            faults: vec![],
+            gyro_noise: 0.003,
+            az_noise: 0.3,
+            seed,
+        }
+    }
+}
+
 /// One telemetry sample plus the truth.
 #[derive(Debug, Clone, Copy)]
 pub struct VehicleSample {
