@@ -9,8 +9,9 @@
 use crate::diagnose::vehicle::{Decision, Diagnoser, DiagnosisParams, Event};
 use crate::estimate::vehicle::{AhcEstimate, VehicleFilters, build};
 use crate::model::MAX_ACTUATORS;
-use crate::model::calibrate::{CalibrationSample, ScaledFit, calibrate_scaled};
+use crate::model::calibrate::{CalibrationSample, ScaledFit, calibrate_arx, calibrate_scaled};
 use crate::telemetry::detect::{Detection, detect};
+use crate::telemetry::profile::Dynamics;
 use crate::telemetry::{Profile, TelemetrySample, VehicleInfo};
 
 #[derive(Debug, Clone)]
@@ -62,6 +63,11 @@ struct StoredSample {
     az: Option<f64>,
 }
 
+/// Commands kept for an identified model's delay (samples).
+const U_HISTORY: usize = 8;
+/// Longest command delay the identification considers (s).
+const MAX_DELAY_S: f64 = 0.12;
+
 struct Running {
     profile: Profile,
     filters: Box<dyn VehicleFilters>,
@@ -70,6 +76,14 @@ struct Running {
     l: usize,
     m: usize,
     prev_u: Option<[f64; MAX_ACTUATORS]>,
+    /// The commands of the last steps (ring) and how many were pushed since the last gap:
+    /// an identified model takes them `delay` steps late.
+    u_history: [[f64; MAX_ACTUATORS]; U_HISTORY],
+    u_pushed: usize,
+    delay: usize,
+    /// The last two measured rates (identified models take their increment).
+    rates_prev: [[f64; 3]; 2],
+    exogenous: bool,
     last_t: f64,
     est: [[AhcEstimate; MAX_ACTUATORS]; 2],
     decisions: Vec<Decision>,
@@ -114,6 +128,10 @@ pub struct VehiclePipeline {
     pub last_sample_t: Option<f64>,
     /// Actuators with a fault in force, by index.
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
+}
+
+fn mean_square(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64
 }
 
 fn median_interval(ts: impl Iterator<Item = f64>) -> f64 {
@@ -240,7 +258,10 @@ impl VehiclePipeline {
                     );
                     self.stage = Stage::Grounded;
                 }
-                Stage::Running(r) => r.prev_u = None,
+                Stage::Running(r) => {
+                    r.prev_u = None;
+                    r.u_pushed = 0;
+                }
                 _ => {}
             }
             return;
@@ -311,6 +332,7 @@ impl VehiclePipeline {
                 };
                 let Some(prev_u) = r.prev_u.replace(u) else {
                     r.last_t = s.t;
+                    r.u_pushed = 0;
                     return;
                 };
                 if s.t - r.last_t > 5.0 * r.dt {
@@ -329,7 +351,24 @@ impl VehiclePipeline {
                         }
                     }
                 }
-                let res = r.filters.step(&prev_u[..r.l], &y[..r.m]);
+                r.u_history[r.u_pushed % U_HISTORY] = prev_u;
+                r.u_pushed += 1;
+                // Until the history covers the delay (after a gap), the oldest command stands in.
+                let back = r.delay.min(r.u_pushed - 1);
+                let acting = r.u_history[(r.u_pushed - 1 - back) % U_HISTORY];
+                let mut input = [0.0; crate::model::MAX_INPUTS];
+                input[..r.l].copy_from_slice(&acting[..r.l]);
+                let n_in = if r.exogenous {
+                    for i in 0..3 {
+                        input[r.l + i] = r.rates_prev[1][i] - r.rates_prev[0][i];
+                    }
+                    r.l + 3
+                } else {
+                    r.l
+                };
+                r.rates_prev = [r.rates_prev[1], s.rates];
+                let prev_u = acting;
+                let res = r.filters.step(&input[..n_in], &y[..r.m]);
                 self.counters.steps += 1;
                 for (f, out) in res.iter().enumerate() {
                     if out.is_err() {
@@ -354,10 +393,24 @@ impl VehiclePipeline {
                 let views = [&r.est[0][..r.l], &r.est[1][..r.l]];
                 r.decisions.clear();
                 r.diag.update(s.t, &prev_u[..r.l], &views, &mut r.decisions);
+                for f in 0..2 {
+                    for j in 0..r.l {
+                        r.est[f][j].deviation = r.diag.deviation(f, j);
+                    }
+                }
+                let views = [&r.est[0][..r.l], &r.est[1][..r.l]];
                 sink.estimates(s.t, self.sysid, &views, &r.profile);
                 for d in &r.decisions {
                     sink.decision(d, &r.profile);
                     self.counters.decisions += 1;
+                    if d.event == Event::Fault
+                        && let Some(j) = d
+                            .actuator
+                            .as_deref()
+                            .and_then(|a| r.profile.actuator_index(a))
+                    {
+                        r.filters.forget(j);
+                    }
                 }
                 for j in 0..r.l {
                     self.active[j] = r.diag.active(j);
@@ -385,6 +438,14 @@ impl VehiclePipeline {
             );
             profile.model.measure_az = false;
         }
+        // An identified model predicts the rates only: a static a_z row cannot follow a
+        // helicopter's vertical manoeuvres (R² below 0.2 on the TradHeli SITL even with the
+        // vertical speed) and its errors, slow and correlated with the manoeuvre, pulled the
+        // swash servos' estimates off by up to 0.5 (measured). Isolation works in the observable
+        // space instead, where what rates cannot see is never blamed on one actuator.
+        if profile.model.dynamics == Dynamics::Arx && profile.model.measure_az {
+            profile.model.measure_az = false;
+        }
         // The outputs of sample k act until sample k+1: pair each rate with the previous outputs.
         let shifted: Vec<CalibrationSample> = samples
             .windows(2)
@@ -400,48 +461,87 @@ impl VehiclePipeline {
             .filter(|c| !profile.model.measure_az || c.az.is_some())
             .collect();
         let base = profile.rate_params();
-        let fit = match calibrate_scaled(&shifted, dt, &base) {
-            Ok(f) => f,
-            Err(e) => {
-                sink.message(self.sysid, &format!("error: calibration failed: {e}"));
-                self.stage = Stage::Failed;
-                return;
+        let (calibrated, fit, summary) = if profile.model.dynamics == Dynamics::Arx {
+            let max_delay = ((MAX_DELAY_S / dt).round() as usize).min(U_HISTORY - 1);
+            let arx = match calibrate_arx(&shifted, dt, max_delay, &base) {
+                Ok(f) => f,
+                Err(e) => {
+                    sink.message(self.sysid, &format!("error: calibration failed: {e}"));
+                    self.stage = Stage::Failed;
+                    return;
+                }
+            };
+            let mut calibrated = profile.clone();
+            calibrated.rate_hz = (1e3 / dt).round() / 1e3;
+            let rate_sd = mean_square(&arx.quality.residual_std[..3]);
+            calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
+            if calibrated.model.measure_az
+                && let Some(sd) = arx.quality.residual_std.get(3)
+            {
+                calibrated.noise.az = sd.max(profile.noise.az);
             }
+            let axes = ["roll", "pitch", "yaw", "a_z"];
+            let mut parts: Vec<String> = arx.quality.r_squared[..3]
+                .iter()
+                .enumerate()
+                .map(|(i, r2)| format!("{} increment R²={r2:.2}", axes[i]))
+                .collect();
+            if let Some(r2) = arx.quality.r_squared.get(3) {
+                let how = if arx.vertical_scaled {
+                    "scaled"
+                } else {
+                    "offset only"
+                };
+                parts.push(format!("a_z {how} R²={r2:.2}"));
+            }
+            let summary = format!(
+                "identified model, command delay {} ms: {}",
+                (arx.params.delay as f64 * dt * 1e3).round(),
+                parts.join(", ")
+            );
+            calibrated.model.arx = Some(arx.params);
+            (calibrated, None, summary)
+        } else {
+            let fit = match calibrate_scaled(&shifted, dt, &base) {
+                Ok(f) => f,
+                Err(e) => {
+                    sink.message(self.sysid, &format!("error: calibration failed: {e}"));
+                    self.stage = Stage::Failed;
+                    return;
+                }
+            };
+            let mut calibrated = profile.with_rate_params(&fit.params);
+            calibrated.rate_hz = (1e3 / dt).round() / 1e3;
+            // Process noise from what the model could not explain on the healthy stretch, but
+            // never below the profile's: a calm stretch (a still hover) would otherwise make the
+            // filters trust the model more than any manoeuvre or fault transient deserves.
+            let rate_sd = mean_square(&fit.quality.residual_std[..3]);
+            calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
+            if calibrated.model.measure_az
+                && let Some(sd) = fit.quality.residual_std.get(3)
+            {
+                calibrated.noise.az = sd.max(profile.noise.az);
+            }
+            let axes = ["roll", "pitch", "yaw", "a_z"];
+            let summary: Vec<String> = fit
+                .scaled
+                .iter()
+                .enumerate()
+                .map(|(i, sc)| {
+                    format!(
+                        "{} {} R²={:.2}",
+                        axes[i],
+                        if *sc {
+                            format!("x{:.2}", fit.scale[i])
+                        } else {
+                            "offset only".into()
+                        },
+                        fit.quality.r_squared[i]
+                    )
+                })
+                .collect();
+            (calibrated, Some(fit), summary.join(", "))
         };
-        let mut calibrated = profile.with_rate_params(&fit.params);
-        calibrated.rate_hz = (1e3 / dt).round() / 1e3;
-        // Process noise from what the model could not explain on the healthy stretch, but
-        // never below the profile's: a calm stretch (a still hover) would otherwise make the
-        // filters trust the model more than any manoeuvre or fault transient deserves.
-        let rate_sd = fit.quality.residual_std[..3]
-            .iter()
-            .map(|v| v * v)
-            .sum::<f64>()
-            / 3.0;
-        calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
-        if calibrated.model.measure_az
-            && let Some(sd) = fit.quality.residual_std.get(3)
-        {
-            calibrated.noise.az = sd.max(profile.noise.az);
-        }
-        let axes = ["roll", "pitch", "yaw", "a_z"];
-        let summary: Vec<String> = fit
-            .scaled
-            .iter()
-            .enumerate()
-            .map(|(i, sc)| {
-                format!(
-                    "{} {} R²={:.2}",
-                    axes[i],
-                    if *sc {
-                        format!("x{:.2}", fit.scale[i])
-                    } else {
-                        "offset only".into()
-                    },
-                    fit.quality.r_squared[i]
-                )
-            })
-            .collect();
         sink.message(
             self.sysid,
             &format!(
@@ -449,7 +549,7 @@ impl VehiclePipeline {
                 samples.last().map_or(0.0, |s| s.t) - samples[0].t,
                 samples.len(),
                 dt * 1e3,
-                summary.join(", ")
+                summary
             ),
         );
         let filters = match build(&calibrated, dt) {
@@ -461,9 +561,25 @@ impl VehiclePipeline {
             }
         };
         let m = filters.measurements();
+        let exogenous = filters.inputs() > l;
+        let delay = calibrated.model.arx.as_ref().map_or(0, |a| a.delay);
         let diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, &calibrated, dt);
-        self.fit = Some(fit);
+        self.fit = fit;
         let last = samples.last().map(|s| (s.t, s.u));
+        // Seed the command history and the last rates with the end of the healthy stretch.
+        let mut u_history = [[0.0; MAX_ACTUATORS]; U_HISTORY];
+        let tail = &samples[samples.len().saturating_sub(U_HISTORY)..];
+        // The newest stored command becomes `prev_u`; the ones before it are history.
+        let older = &tail[..tail.len().saturating_sub(1)];
+        for (k, s) in older.iter().enumerate() {
+            u_history[k] = s.u;
+        }
+        let n = samples.len();
+        let rates_prev = if n >= 2 {
+            [samples[n - 2].rates, samples[n - 1].rates]
+        } else {
+            [[0.0; 3]; 2]
+        };
         self.stage = Stage::Running(Box::new(Running {
             profile: calibrated,
             filters,
@@ -472,6 +588,11 @@ impl VehiclePipeline {
             l,
             m,
             prev_u: last.map(|l| l.1),
+            u_history,
+            u_pushed: older.len(),
+            delay,
+            rates_prev,
+            exogenous,
             last_t: last.map_or(0.0, |l| l.0),
             est: [[AhcEstimate::default(); MAX_ACTUATORS]; 2],
             decisions: Vec::with_capacity(8),

@@ -7,6 +7,14 @@
 //! only used to classify, and only when the command has varied enough to separate them
 //! (otherwise `excitation_low` is emitted instead of a guess).
 //!
+//! Isolation works in the space of what the filters can observe. The estimated deviations map
+//! to an effect on the measurements, `v = Σ_j b_j e_j` (`b_j` the actuator's weighted effect per
+//! step); the actuator whose single effect explains most of `v` is the candidate and gets
+//! `x = b_jᵀv / |b_j|²`, and the others are judged on what it leaves unexplained. Deviations
+//! the measurements cannot see (a helicopter's collective and the tail's compensating pitch,
+//! a hexacopter's motor pairs) then never look like a fault of one actuator, however far the
+//! individual estimates wander along them; a lone fault is attributed whole to its actuator.
+//!
 //! Detection: a CUSUM on `|e_j| / threshold - 1` (units of seconds over threshold), alarm when
 //! it passes `cusum_h_s`; clearing when `|e_j|` has stayed below half the threshold for
 //! `clear_s` (hysteresis). The threshold is calibrated on healthy Monte-Carlo flights with gusts
@@ -225,8 +233,10 @@ pub struct Diagnoser {
     dt: f64,
     t0: Option<f64>,
     actuators: Vec<ActuatorState>,
-    /// Group id of each actuator (like actuators share one).
+    /// Group id of each actuator (motors share one: their common mode is thrust mismatch).
     groups: Vec<usize>,
+    /// Weighted effect of each actuator on the measurements (see the module note).
+    effects: Vec<[f64; 4]>,
 }
 
 impl Diagnoser {
@@ -239,10 +249,10 @@ impl Diagnoser {
             .enumerate()
             .map(|(j, a)| match a.role {
                 Role::Motor => 0,
-                Role::Swash => 1,
-                _ => 2 + j,
+                _ => 1 + j,
             })
             .collect();
+        let effects = crate::estimate::vehicle::weighted_effects(profile, dt);
         let params = DiagnosisParams {
             threshold: profile.diagnosis.threshold,
             ..params
@@ -256,11 +266,12 @@ impl Diagnoser {
             dt,
             t0: None,
             groups,
+            effects,
         }
     }
 
-    /// The median deviation of actuator `j`'s group of like actuators (three or more motors or
-    /// swash servos): all of them moving together is model mismatch or a payload change, not
+    /// The median deviation of actuator `j`'s group of like actuators (three or more motors):
+    /// all of them moving together is model mismatch or a payload change, not
     /// one actuator's fault. Zero for actuators without such a group.
     fn common_mode(&self, raw: &[f64], j: usize) -> f64 {
         let g = self.groups[j];
@@ -281,6 +292,73 @@ impl Diagnoser {
             v[n / 2]
         } else {
             0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    }
+
+    /// Attribute the deviations `e` (one per actuator) in the observable space `v = Σ b_j e_j`
+    /// by orthogonal matching pursuit: the actuator whose effect explains most of what is still
+    /// unexplained joins the explanation, all joined ones are refitted together, and this stops
+    /// when the next one's share would be under half the fault threshold. Joined actuators get
+    /// their fitted deviation, the others their share of the remainder.
+    fn explain(&self, e: &[f64], out: &mut [f64]) {
+        const MAX_JOINED: usize = 4;
+        let l = e.len();
+        let b = &self.effects;
+        let mut v = [0.0; 4];
+        for (bj, ej) in b.iter().zip(e) {
+            for i in 0..4 {
+                v[i] += bj[i] * ej;
+            }
+        }
+        let dot = |a: &[f64; 4], c: &[f64; 4]| -> f64 { (0..4).map(|i| a[i] * c[i]).sum() };
+        let share = |bj: &[f64; 4], r: &[f64; 4]| -> f64 {
+            let n = dot(bj, bj);
+            if n > 0.0 { dot(bj, r) / n } else { 0.0 }
+        };
+        let mut joined = [0usize; MAX_JOINED];
+        let mut x = [0.0; MAX_JOINED];
+        let mut k = 0;
+        let mut rest = v;
+        while k < MAX_JOINED.min(l) {
+            let cand = (0..l)
+                .filter(|j| !joined[..k].contains(j))
+                .map(|j| (j, share(&b[j], &rest)))
+                .max_by(|p, q| {
+                    (p.1 * p.1 * dot(&b[p.0], &b[p.0]))
+                        .total_cmp(&(q.1 * q.1 * dot(&b[q.0], &b[q.0])))
+                });
+            let Some((j, sj)) = cand else { break };
+            if k > 0 && sj.abs() < 0.5 * self.params.threshold {
+                break;
+            }
+            joined[k] = j;
+            k += 1;
+            // Refit all joined together: normal equations (k ≤ 4), Gaussian elimination.
+            let mut a = [[0.0; MAX_JOINED + 1]; MAX_JOINED];
+            for r in 0..k {
+                for c in 0..k {
+                    a[r][c] = dot(&b[joined[r]], &b[joined[c]]);
+                }
+                a[r][k] = dot(&b[joined[r]], &v);
+            }
+            let Some(sol) = solve_small(&mut a, k) else {
+                // Effects of the joined actuators are dependent: keep the previous fit.
+                k -= 1;
+                break;
+            };
+            x[..k].copy_from_slice(&sol[..k]);
+            rest = v;
+            for (r, &jr) in joined[..k].iter().enumerate() {
+                for i in 0..4 {
+                    rest[i] -= b[jr][i] * x[r];
+                }
+            }
+        }
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = match joined[..k].iter().position(|&q| q == j) {
+                Some(r) => x[r],
+                None => share(&b[j], &rest),
+            };
         }
     }
 
@@ -317,11 +395,13 @@ impl Diagnoser {
                 raw[f][j] = (e.gamma - 1.0) * st.u.mean + e.delta;
             }
         }
-        let mut common = [[0.0; crate::model::MAX_ACTUATORS]; 2];
-        for (c, r) in common.iter_mut().zip(&raw) {
-            for (j, slot) in c[..l].iter_mut().enumerate() {
-                *slot = self.common_mode(&r[..l], j);
+        let mut explained = [[0.0; crate::model::MAX_ACTUATORS]; 2];
+        for (x, r) in explained.iter_mut().zip(&raw) {
+            let mut e = [0.0; crate::model::MAX_ACTUATORS];
+            for j in 0..l {
+                e[j] = r[j] - self.common_mode(&r[..l], j);
             }
+            self.explain(&e[..l], &mut x[..l]);
         }
         for j in 0..l {
             let st = &mut self.actuators[j];
@@ -329,7 +409,7 @@ impl Diagnoser {
                 let e = est[f][j];
                 let ch = &mut st.channels[f];
                 ch.last = e;
-                ch.e = raw[f][j] - common[f][j];
+                ch.e = explained[f][j];
                 let ratio = ch.e.abs() / p.threshold;
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
                 if !warm {
@@ -358,18 +438,8 @@ impl Diagnoser {
         if !warm {
             return;
         }
-        // Isolation per filter: among the alarmed actuators the one with the largest deviation;
-        // the others alarmed at the same time are reported with it (`also`).
-        let mut top: [Option<usize>; 2] = [None, None];
-        for (f, slot) in top.iter_mut().enumerate() {
-            *slot = (0..l)
-                .filter(|&j| self.actuators[j].channels[f].alarm)
-                .max_by(|&x, &y| {
-                    let ex = self.actuators[x].channels[f].e.abs();
-                    let ey = self.actuators[y].channels[f].e.abs();
-                    ex.total_cmp(&ey)
-                });
-        }
+        // Isolation is in the deviations themselves (`explain`): an actuator alarms only on what
+        // the measurements attribute to it once the others' effects are accounted for.
         for j in 0..l {
             // Gating: say once when gain and bias cannot be told apart (and again after the
             // command has been exciting in between).
@@ -392,7 +462,7 @@ impl Diagnoser {
                 out.push(d);
             }
             let filters: Vec<&'static str> = (0..2)
-                .filter(|&f| top[f] == Some(j))
+                .filter(|&f| self.actuators[j].channels[f].alarm)
                 .map(|f| FILTER_NAMES[f])
                 .collect();
             let st = &self.actuators[j];
@@ -555,4 +625,33 @@ impl Diagnoser {
             detail: None,
         }
     }
+}
+
+/// Solve the `k`×`k` system in `a` (augmented with the right-hand side in column `k`) by
+/// Gaussian elimination with partial pivoting; `None` when it is (nearly) singular.
+fn solve_small<const C: usize>(a: &mut [[f64; C]; 4], k: usize) -> Option<[f64; 4]> {
+    let scale = (0..k).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+    for col in 0..k {
+        let piv = (col..k).max_by(|&p, &q| a[p][col].abs().total_cmp(&a[q][col].abs()))?;
+        if a[piv][col].abs().is_nan() || a[piv][col].abs() <= 1e-9 * scale {
+            return None;
+        }
+        a.swap(col, piv);
+        let pivot_row = a[col];
+        for row in a[col + 1..k].iter_mut() {
+            let f = row[col] / pivot_row[col];
+            for (v, p) in row[col..=k].iter_mut().zip(&pivot_row[col..=k]) {
+                *v -= f * p;
+            }
+        }
+    }
+    let mut x = [0.0; 4];
+    for r in (0..k).rev() {
+        let mut acc = a[r][k];
+        for c in r + 1..k {
+            acc -= a[r][c] * x[c];
+        }
+        x[r] = acc / a[r][r];
+    }
+    Some(x)
 }

@@ -240,6 +240,31 @@ pub fn add_jump_set<const N: usize>(
     }
 }
 
+/// [`add_jump_set`] on the listed coordinates only (one actuator's gain and bias).
+pub fn add_jump_set_on<const N: usize>(
+    p: &mut SMatrix<f64, N, N>,
+    p0: &SMatrix<f64, N, N>,
+    coords: &[usize],
+) {
+    let tr_j: f64 = coords.iter().map(|&i| p0[(i, i)].max(0.0)).sum();
+    let tr_p = p.trace().max(0.0);
+    if tr_j <= 0.0 {
+        return;
+    }
+    if tr_p <= 0.0 {
+        *p = SMatrix::zeros();
+        for &i in coords {
+            p[(i, i)] = p0[(i, i)].max(0.0);
+        }
+        return;
+    }
+    let beta = tr_j.sqrt() / (tr_j.sqrt() + tr_p.sqrt());
+    *p /= 1.0 - beta;
+    for &i in coords {
+        p[(i, i)] += p0[(i, i)].max(0.0) / beta;
+    }
+}
+
 impl EsmfOutcome {
     /// The data (nearly) contradicted the predicted set: `δ_k` at or below the jump threshold
     /// before any jump or inflation.

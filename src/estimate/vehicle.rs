@@ -30,6 +30,10 @@ pub struct AhcEstimate {
     /// Adapted process noise of gamma and delta.
     pub q_gamma: f64,
     pub q_delta: f64,
+    /// The effective output deviation at the operating point that the measurements attribute
+    /// to this actuator (filled in by the diagnosis; see `diagnose::vehicle`). Unlike
+    /// `(gamma - 1) u + delta` it does not wander along what the measurements cannot see.
+    pub deviation: f64,
 }
 
 impl AhcEstimate {
@@ -58,6 +62,9 @@ pub enum BuildError {
 /// Both monitoring filters of one vehicle.
 pub trait VehicleFilters: Send {
     fn actuators(&self) -> usize;
+    /// Inputs `step` takes: the actuators' commands, then (identified discrete models) the
+    /// previous step's measured rate increment.
+    fn inputs(&self) -> usize;
     fn measurements(&self) -> usize;
     /// One step of both filters. `u.len()` = actuators, `y` = [p, q, r(, a_z)].
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2];
@@ -66,6 +73,11 @@ pub trait VehicleFilters: Send {
     fn nis(&self, filter: usize) -> f64;
     /// Re-initialise one filter (after repeated numerical failure).
     fn reset(&mut self, filter: usize);
+    /// Forget what both filters knew about actuator `j`'s gain and bias (its prior uncertainty
+    /// is added back) and restart the step-size schedules: called when a fault is decided on
+    /// it, so the estimates re-converge from the data since the change instead of fading
+    /// slowly from the healthy values.
+    fn forget(&mut self, j: usize);
 }
 
 /// Delta of range outputs (motors, throttle): random-walk std and prior std, as fractions of
@@ -94,7 +106,10 @@ pub struct FilterSetup<const N: usize, const M: usize> {
 
 impl<const N: usize, const M: usize> FilterSetup<N, M> {
     pub fn from_profile(profile: &Profile, dt: f64) -> Result<Self, RateModelError> {
-        let model = RateModel::<N, M>::new(&profile.rate_params(), dt)?;
+        let model = match &profile.model.arx {
+            Some(arx) => RateModel::<N, M>::from_arx(arx, dt)?,
+            None => RateModel::<N, M>::new(&profile.rate_params(), dt)?,
+        };
         let l = model.actuators();
         let noise = &profile.noise;
         // The profile's process noise is per step at its own rate; rescale to this dt.
@@ -159,6 +174,49 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             model,
         })
     }
+}
+
+/// What one unit of each actuator's effective output does to the measurements over one step,
+/// `[roll, pitch, yaw, a_z]` (a_z zero when not measured), each row divided by the noise the
+/// filters assume on it: the metric in which the diagnosis asks which single actuator explains
+/// the estimated deviations (see `diagnose::vehicle`).
+#[allow(clippy::needless_range_loop)] // rows i of the effect, as in the model
+pub fn weighted_effects(profile: &Profile, dt: f64) -> Vec<[f64; 4]> {
+    let l = profile.actuators.len();
+    let rate_sd = (profile.noise.rate_process * (dt * profile.rate_hz).sqrt()).max(1e-9);
+    let az_sd = profile.noise.az.max(1e-9);
+    let az = profile.model.measure_az;
+    let mut out = vec![[0.0; 4]; l];
+    match &profile.model.arx {
+        Some(arx) => {
+            for (j, o) in out.iter_mut().enumerate() {
+                for i in 0..3 {
+                    o[i] = arx.input[j][i] / rate_sd;
+                }
+                if az {
+                    o[3] = arx.vertical.get(j).copied().unwrap_or(0.0) / az_sd;
+                }
+            }
+        }
+        None => {
+            let p = profile.rate_params();
+            for (j, o) in out.iter_mut().enumerate() {
+                for i in 0..3 {
+                    let d = p.damping[i];
+                    let hold = if d * dt > 1e-12 {
+                        -(-d * dt).exp_m1() / d
+                    } else {
+                        dt
+                    };
+                    o[i] = hold * p.effectiveness[j][i] / rate_sd;
+                }
+                if az {
+                    o[3] = p.vertical[j] / az_sd;
+                }
+            }
+        }
+    }
+    out
 }
 
 /// MIT-UKF and MIT-ESMF of one size.
@@ -245,6 +303,7 @@ fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
         block: [p[(gi, gi)], p[(gi, di)], p[(di, di)]],
         q_gamma: q[gi],
         q_delta: q[di],
+        deviation: 0.0,
     }
 }
 
@@ -254,6 +313,10 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
     }
     fn measurements(&self) -> usize {
         M
+    }
+    fn inputs(&self) -> usize {
+        use crate::model::Model;
+        self.setup.model.input_dim()
     }
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2] {
         if y.len() != M {
@@ -290,6 +353,17 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         } else {
             M as f64 * (1.0 - self.esmf.esmf.last.consistency)
         }
+    }
+    fn forget(&mut self, j: usize) {
+        let l = self.actuators();
+        let (gi, di) = (3 + j, 3 + l + j);
+        let p = &mut self.ukf.ukf.p;
+        p[(gi, gi)] += self.setup.kalman_p0[(gi, gi)];
+        p[(di, di)] += self.setup.kalman_p0[(di, di)];
+        self.ukf.restart_adaptation();
+        super::esmf::add_jump_set_on(&mut self.esmf.esmf.p, &self.setup.set_p0, &[gi, di]);
+        self.esmf.esmf.intersect_box();
+        self.esmf.schedule.restart();
     }
     fn reset(&mut self, filter: usize) {
         let adapt = AdaptationParams::default();

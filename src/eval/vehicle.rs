@@ -110,6 +110,12 @@ pub fn run_vehicle_scenario(
         let views = [&est[0][..l], &est[1][..l]];
         new_decisions.clear();
         diag.update(s.t, &s.u[..l], &views, &mut new_decisions);
+        for (f, row) in est.iter_mut().enumerate() {
+            for (j, e) in row[..l].iter_mut().enumerate() {
+                e.deviation = diag.deviation(f, j);
+            }
+        }
+        let views = [&est[0][..l], &est[1][..l]];
         for d in &new_decisions {
             sink.decision(d);
         }

@@ -11,10 +11,10 @@ mod paper_heli;
 mod rate;
 
 pub use paper_heli::{PaperHeli, PaperHeliParams};
-pub use rate::{MAX_ACTUATORS, RateModel, RateModelError, RateParams};
+pub use rate::{ArxParams, MAX_ACTUATORS, RateModel, RateModelError, RateParams};
 
 /// Longest input vector any model takes.
-pub const MAX_INPUTS: usize = MAX_ACTUATORS;
+pub const MAX_INPUTS: usize = MAX_ACTUATORS + 3;
 
 use nalgebra::{SMatrix, SVector};
 

@@ -8,6 +8,18 @@
 //! with `l` actuators and the state `z = [p, q, r, gamma_1..gamma_l, delta_1..delta_l]`, so
 //! `N = 3 + 2l`; `M = 3` (gyro only) or `M = 4` (gyro and vertical specific force). Linear in
 //! `z` for a known `u`; the rates are discretised by zero-order hold of the diagonal damping.
+//!
+//! Internally the model is kept in its discrete form,
+//!
+//! ```text
+//! omega_{k+1} = Phi omega_k + B (Gamma u_k + Delta) + E x_k + c_d
+//! ```
+//!
+//! which the continuous model above fills with `Phi = exp(-D dt)`, `B = hold G`, `E = 0`. A
+//! vehicle whose rate response is not first order (a helicopter's rotor flapping and servo lag)
+//! uses an identified [`ArxParams`] instead: a full `Phi` (cross-axis coupling), full `B`, and
+//! `x_k` the *measured* angular increment of the previous step (`y_k - y_{k-1}`), passed as
+//! three extra inputs after the actuators' commands.
 
 // Index loops mirror the matrix maths (rows i, actuators j) and read best that way.
 #![allow(clippy::needless_range_loop)]
@@ -52,6 +64,28 @@ impl RateParams {
     }
 }
 
+/// An identified discrete rate model (see the module note): what
+/// [`crate::model::calibrate::calibrate_arx`] fits when the profile asks for `dynamics = "arx"`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArxParams {
+    /// Sample period the parameters hold for (s).
+    pub dt: f64,
+    /// Samples by which the commands act late (servo and rotor lag).
+    pub delay: usize,
+    /// `Phi`, rows p, q, r.
+    pub phi: [[f64; 3]; 3],
+    /// `E`: effect of the previous step's measured rate increment, rows p, q, r.
+    pub previous_increment: [[f64; 3]; 3],
+    /// `B`: one column `[roll, pitch, yaw]` (rad/s per step per unit of command) per actuator.
+    pub input: Vec<[f64; 3]>,
+    /// `c_d` (rad/s per step).
+    pub offset: [f64; 3],
+    /// Vertical specific force per unit of command and its trim (static, as in [`RateParams`]).
+    pub vertical: Vec<f64>,
+    pub vertical_offset: f64,
+}
+
 /// Why a [`RateModel`] cannot be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RateModelError {
@@ -65,6 +99,8 @@ pub enum RateModelError {
     Vertical { got: usize, l: usize },
     #[error("non-finite or negative parameter ({what})")]
     Parameter { what: &'static str },
+    #[error("the identified model is for dt {model} s, the samples come every {dt} s")]
+    Period { model: f64, dt: f64 },
 }
 
 /// The discrete rate-effectiveness model with `N = 3 + 2l` states and `M` measurements.
@@ -72,12 +108,14 @@ pub enum RateModelError {
 pub struct RateModel<const N: usize, const M: usize> {
     l: usize,
     dt: f64,
-    /// `exp(-D dt)` per axis.
-    decay: [f64; 3],
-    /// `(1 - exp(-D dt)) / D` per axis (`dt` where `D = 0`): the ZOH input gain.
-    hold: [f64; 3],
-    /// Rows 0..3: `G`; row 3: `g_z`.
+    /// `Phi`.
+    phi: [[f64; 3]; 3],
+    /// Rows 0..3: `B` (discrete); row 3: `g_z`.
     g: [[f64; MAX_ACTUATORS]; 4],
+    /// `E`, and whether the model takes the previous increment as input at all.
+    previous_increment: [[f64; 3]; 3],
+    exogenous: bool,
+    /// Rows 0..3: `c_d`; 3: `c_z`.
     offset: [f64; 4],
 }
 
@@ -114,11 +152,11 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
                 what: "effectiveness or offset",
             });
         }
-        let mut decay = [0.0; 3];
+        let mut phi = [[0.0; 3]; 3];
         let mut hold = [0.0; 3];
         for i in 0..3 {
             let d = params.damping[i];
-            decay[i] = (-d * dt).exp();
+            phi[i][i] = (-d * dt).exp();
             // -expm1 keeps precision for small D dt.
             hold[i] = if d * dt > 1e-12 {
                 -(-d * dt).exp_m1() / d
@@ -128,6 +166,74 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
         }
         let mut g = [[0.0; MAX_ACTUATORS]; 4];
         for (j, col) in params.effectiveness.iter().enumerate() {
+            for i in 0..3 {
+                g[i][j] = hold[i] * col[i];
+            }
+            if M == 4 {
+                g[3][j] = params.vertical[j];
+            }
+        }
+        let mut offset = [0.0; 4];
+        for i in 0..3 {
+            offset[i] = hold[i] * params.offset[i];
+        }
+        offset[3] = params.vertical_offset;
+        Ok(Self {
+            l,
+            dt,
+            phi,
+            g,
+            previous_increment: [[0.0; 3]; 3],
+            exogenous: false,
+            offset,
+        })
+    }
+
+    /// The model of identified discrete parameters, at the period they were identified at.
+    pub fn from_arx(params: &ArxParams, dt: f64) -> Result<Self, RateModelError> {
+        let l = params.input.len();
+        if l == 0 || l > MAX_ACTUATORS {
+            return Err(RateModelError::Actuators { l });
+        }
+        if N != 3 + 2 * l {
+            return Err(RateModelError::StateSize { n: N, l });
+        }
+        if M != 3 && M != 4 {
+            return Err(RateModelError::MeasurementSize { m: M });
+        }
+        if M == 4 && params.vertical.len() != l {
+            return Err(RateModelError::Vertical {
+                got: params.vertical.len(),
+                l,
+            });
+        }
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(RateModelError::Parameter { what: "dt" });
+        }
+        // The parameters are per step: another period would need another identification.
+        if params.dt.is_nan() || (params.dt - dt).abs() > 0.05 * dt {
+            return Err(RateModelError::Period {
+                model: params.dt,
+                dt,
+            });
+        }
+        let finite = params
+            .phi
+            .iter()
+            .chain(&params.previous_increment)
+            .chain(&params.input)
+            .flatten()
+            .chain(&params.offset)
+            .chain(&params.vertical)
+            .all(|v| v.is_finite())
+            && params.vertical_offset.is_finite();
+        if !finite {
+            return Err(RateModelError::Parameter {
+                what: "identified model",
+            });
+        }
+        let mut g = [[0.0; MAX_ACTUATORS]; 4];
+        for (j, col) in params.input.iter().enumerate() {
             for i in 0..3 {
                 g[i][j] = col[i];
             }
@@ -141,11 +247,23 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
         Ok(Self {
             l,
             dt,
-            decay,
-            hold,
+            phi: params.phi,
             g,
+            previous_increment: params.previous_increment,
+            exogenous: true,
             offset,
         })
+    }
+
+    /// Whether `u` carries the previous measured rate increment after the commands.
+    pub fn takes_previous_increment(&self) -> bool {
+        self.exogenous
+    }
+
+    /// The discrete effect of one unit of command `j` on the measurements over one step:
+    /// `[roll, pitch, yaw(, a_z)]` (rad/s per step; m/s²).
+    pub fn effect(&self, j: usize) -> [f64; 4] {
+        [self.g[0][j], self.g[1][j], self.g[2][j], self.g[3][j]]
     }
 
     pub fn actuators(&self) -> usize {
@@ -178,7 +296,7 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
 
 impl<const N: usize, const M: usize> Model<N, M> for RateModel<N, M> {
     fn input_dim(&self) -> usize {
-        self.l
+        self.l + if self.exogenous { 3 } else { 0 }
     }
 
     fn dt(&self) -> f64 {
@@ -189,10 +307,18 @@ impl<const N: usize, const M: usize> Model<N, M> for RateModel<N, M> {
         let mut out = *z;
         for i in 0..3 {
             let mut acc = self.offset[i];
+            for k in 0..3 {
+                acc += self.phi[i][k] * z[k];
+            }
             for j in 0..self.l {
                 acc += self.g[i][j] * self.effective(z, u, j);
             }
-            out[i] = self.decay[i] * z[i] + self.hold[i] * acc;
+            if self.exogenous {
+                for k in 0..3 {
+                    acc += self.previous_increment[i][k] * u[self.l + k];
+                }
+            }
+            out[i] = acc;
         }
         out
     }
@@ -200,10 +326,12 @@ impl<const N: usize, const M: usize> Model<N, M> for RateModel<N, M> {
     fn jacobian(&self, _z: &SVector<f64, N>, u: &[f64]) -> SMatrix<f64, N, N> {
         let mut a = SMatrix::<f64, N, N>::identity();
         for i in 0..3 {
-            a[(i, i)] = self.decay[i];
+            for k in 0..3 {
+                a[(i, k)] = self.phi[i][k];
+            }
             for j in 0..self.l {
-                a[(i, 3 + j)] = self.hold[i] * self.g[i][j] * u[j];
-                a[(i, 3 + self.l + j)] = self.hold[i] * self.g[i][j];
+                a[(i, 3 + j)] = self.g[i][j] * u[j];
+                a[(i, 3 + self.l + j)] = self.g[i][j];
             }
         }
         a

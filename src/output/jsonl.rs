@@ -46,6 +46,8 @@ pub struct ActuatorEstimate<'a> {
     pub delta: f64,
     pub delta_lo: f64,
     pub delta_hi: f64,
+    /// Effective output deviation the measurements attribute to this actuator.
+    pub deviation: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -80,6 +82,7 @@ impl<'a> EstimateRecord<'a> {
                     delta: e.delta,
                     delta_lo: e.delta_lo,
                     delta_hi: e.delta_hi,
+                    deviation: e.deviation,
                 })
                 .collect(),
         }

@@ -107,6 +107,23 @@ pub struct ModelSpec {
     /// Measure vertical specific force `a_z` as a fourth output.
     #[serde(default)]
     pub measure_az: bool,
+    /// What the calibration identifies on the healthy stretch of a log or live flight:
+    /// `first_order` (default) scales the geometry per axis; `arx` identifies a discrete model
+    /// with cross-axis coupling, full effectiveness, the previous angular acceleration and a
+    /// command delay (for rotors that flap and servos that lag; see `calibrate_arx`).
+    #[serde(default)]
+    pub dynamics: Dynamics,
+    /// The identified discrete model (written by calibration; used instead of `D`/`G`/`c`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arx: Option<crate::model::ArxParams>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Dynamics {
+    #[default]
+    FirstOrder,
+    Arx,
 }
 
 /// Noise levels the filters are set up with (standard deviations).
