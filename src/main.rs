@@ -15,6 +15,21 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// `println!` that ends the program quietly when stdout is closed (`ahcmon eval | head`)
+/// instead of panicking; other write errors are reported on stderr once and output stops.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout(), $($arg)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            eprintln!("ahcmon: cannot write to stdout: {e}");
+            std::process::exit(1);
+        }
+    }};
+}
+
 #[derive(Parser)]
 #[command(
     name = "ahcmon",
@@ -53,6 +68,19 @@ enum Command {
         /// Write every k-th step's estimates.
         #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
         decimate: u64,
+    },
+    /// Calibrate each vehicle's decision threshold on healthy Monte-Carlo flights: the smallest
+    /// threshold at which no healthy flight would raise a fault, times a margin. Flown with
+    /// seeds from 1001 on, which the tests and `eval` do not use.
+    Thresholds {
+        /// Healthy vehicle scenarios (default: the built-in *-healthy-gusts flights).
+        scenarios: Vec<String>,
+        /// Flights per scenario.
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=1000))]
+        seeds: u64,
+        /// Print JSON instead of the table.
+        #[arg(long)]
+        json: bool,
     },
     /// Fly a vehicle scenario in the simulator (with the monitor's filters and diagnosis
     /// running on it) and write its ground truth, decisions and estimates as JSON lines.
@@ -288,6 +316,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             // On a rayon worker, so each vehicle's two filters step on two cores.
             rayon::scope(|_| eval(scenarios, json, plot, seeds))
         }
+        Command::Thresholds {
+            scenarios,
+            seeds,
+            json,
+        } => rayon::scope(|_| thresholds(scenarios, seeds, json)),
         Command::Sim {
             scenario: name,
             truth,
@@ -485,7 +518,7 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         .iter()
         .map(|(k, v)| format!("{k} {v}"))
         .collect();
-    println!(
+    outln!(
         "{}: {} s of {} as sysid {} (seed {}): {}",
         named.name,
         named.scenario.duration_s,
@@ -495,7 +528,7 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         list.join(", ")
     );
     if let Some(s) = &spec {
-        println!(
+        outln!(
             "sent {} frames to {s}{}",
             report.sent,
             if report.unsent > 0 {
@@ -629,15 +662,16 @@ fn monitor(
     }
     print!("{}", summary::render(&monitor, &counters.link, &files.seen));
     if counters.backpressure_drops > 0 {
-        println!(
+        outln!(
             "{} frames dropped: the estimators fell behind",
             counters.backpressure_drops
         );
     }
     if let Some(a) = &files.alerts {
-        println!(
+        outln!(
             "alerts: {} STATUSTEXT sent, {} dropped by the rate limit",
-            a.texts_sent, a.texts_dropped
+            a.texts_sent,
+            a.texts_dropped
         );
     }
     Ok(())
@@ -707,8 +741,8 @@ fn calibrate(
     let text = toml::to_string(&calibrated).context("cannot serialise the profile")?;
     std::fs::write(output, format!("# written by `ahcmon calibrate`\n{text}"))
         .with_context(|| format!("cannot write {}", output.display()))?;
-    println!("{}", calibrated.description);
-    println!("profile written to {}", output.display());
+    outln!("{}", calibrated.description);
+    outln!("profile written to {}", output.display());
     Ok(())
 }
 
@@ -822,7 +856,7 @@ fn replay(
         "{}",
         summary::render(&monitor, &reader.counters, &files.seen)
     );
-    println!(
+    outln!(
         "replayed {} in {:.2} s",
         file.display(),
         replay_time.as_secs_f64()
@@ -857,7 +891,7 @@ fn run_with_files(
         |w: &Option<ahcmon::output::jsonl::JsonlWriter<_>>| w.as_ref().map_or(0, |w| w.lines);
     let truth_lines = files.truth.as_ref().map_or(0, |(w, _, _)| w.lines);
     if print {
-        println!(
+        outln!(
             "{}: {} s of {} (seed {}): {} decision lines, {} estimate lines, {} truth lines",
             named.name,
             named.scenario.duration_s,
@@ -866,6 +900,67 @@ fn run_with_files(
             count(&files.decisions),
             count(&files.estimates),
             truth_lines
+        );
+    }
+    Ok(())
+}
+
+fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> {
+    use ahcmon::eval::thresholds::{CALIBRATION_FIRST_SEED, calibrate_threshold};
+    let list: Vec<NamedScenario> = if names.is_empty() {
+        scenario::all_builtin()?
+            .into_iter()
+            .filter(|n| n.name.ends_with("-healthy-gusts"))
+            .collect()
+    } else {
+        names
+            .iter()
+            .map(|n| scenario::resolve(n))
+            .collect::<Result<_, _>>()?
+    };
+    let seed_list: Vec<u64> = (0..seeds).map(|i| CALIBRATION_FIRST_SEED + i).collect();
+    let progress = std::io::stderr().is_terminal();
+    let mut out = vec![];
+    for named in &list {
+        if progress {
+            eprint!("\rthresholds: {} ({} flights)   ", named.name, seeds);
+        }
+        out.push(calibrate_threshold(named, &seed_list)?);
+    }
+    if progress {
+        eprint!("\r{:60}\r", "");
+    }
+    if json {
+        outln!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    outln!(
+        "{:<24} {:<12} {:>6} {:>14} {:>14} {:>12} {:>12} {:>11} {:>9}",
+        "scenario",
+        "vehicle",
+        "flights",
+        "alarm-free ukf",
+        "alarm-free set",
+        "max|e| ukf",
+        "max|e| set",
+        "recommended",
+        "profile"
+    );
+    for c in &out {
+        let profile = ahcmon::telemetry::Profile::resolve(&c.vehicle)
+            .map(|p| format!("{:.3}", p.diagnosis.threshold))
+            .unwrap_or_else(|_| "-".into());
+        outln!(
+            "{:<24} {:<12} {:>6} {:>14.4} {:>14.4} {:>12.4} {:>12.4} {:>11.3} {:>9}",
+            c.scenario,
+            c.vehicle,
+            c.seeds.len(),
+            c.alarm_free[0],
+            c.alarm_free[1],
+            c.max_abs_deviation[0],
+            c.max_abs_deviation[1],
+            c.recommended,
+            profile
         );
     }
     Ok(())
@@ -906,11 +1001,11 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
         eprint!("\r{:60}\r", "");
     }
     if json {
-        println!("{}", table::to_json(&rows));
+        outln!("{}", table::to_json(&rows));
     } else {
         print!("{}", table::render(&rows));
         if let Some(dir) = &plot {
-            println!("plots written to {}", dir.display());
+            outln!("plots written to {}", dir.display());
         }
     }
     Ok(())

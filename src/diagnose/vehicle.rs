@@ -48,6 +48,10 @@ pub struct DiagnosisParams {
     pub stuck_gamma: f64,
     /// Filters alarming on the same actuator within this time count as agreeing (s).
     pub agree_s: f64,
+    /// An actuator joins the explanation of the deviations only if its own share of what is
+    /// still unexplained is at least this (normalised command); see `explain`. Fixed rather
+    /// than tied to the threshold, so that the threshold calibration does not chase itself.
+    pub explain_min: f64,
 }
 
 impl Default for DiagnosisParams {
@@ -65,6 +69,7 @@ impl Default for DiagnosisParams {
             bias_tau: 0.04,
             stuck_gamma: 0.25,
             agree_s: 0.5,
+            explain_min: 0.04,
         }
     }
 }
@@ -220,6 +225,10 @@ struct ActuatorState {
     class_candidate: Option<(FaultClass, f64)>,
 }
 
+/// Squared fraction of a further actuator's effect that must be independent of the effects
+/// already joined in `explain` (0.25: at least half its norm).
+const MIN_OWN_FRACTION: f64 = 0.25;
+
 /// How long a new class must hold before a `changed` decision reports it (no chatter while
 /// gain and bias settle, e.g. right after a fault is removed).
 const CLASS_HOLD_S: f64 = 1.0;
@@ -233,26 +242,23 @@ pub struct Diagnoser {
     dt: f64,
     t0: Option<f64>,
     actuators: Vec<ActuatorState>,
-    /// Group id of each actuator (motors share one: their common mode is thrust mismatch).
-    groups: Vec<usize>,
     /// Weighted effect of each actuator on the measurements (see the module note).
     effects: Vec<[f64; 4]>,
+    /// The motors, when there are three or more: their median deviation is thrust mismatch.
+    motors: Vec<usize>,
 }
 
 impl Diagnoser {
     pub fn new(params: DiagnosisParams, sysid: u8, profile: &Profile, dt: f64) -> Self {
         let names = profile.actuator_names();
         let channels = profile.actuators.iter().map(|a| a.channel).collect();
-        let groups = profile
-            .actuators
-            .iter()
-            .enumerate()
-            .map(|(j, a)| match a.role {
-                Role::Motor => 0,
-                _ => 1 + j,
-            })
-            .collect();
         let effects = crate::estimate::vehicle::weighted_effects(profile, dt);
+        let mut motors: Vec<usize> = (0..effects.len())
+            .filter(|&j| profile.actuators[j].role == Role::Motor)
+            .collect();
+        if motors.len() < 3 {
+            motors.clear();
+        }
         let params = DiagnosisParams {
             threshold: profile.diagnosis.threshold,
             ..params
@@ -265,40 +271,15 @@ impl Diagnoser {
             channels,
             dt,
             t0: None,
-            groups,
             effects,
-        }
-    }
-
-    /// The median deviation of actuator `j`'s group of like actuators (three or more motors):
-    /// all of them moving together is model mismatch or a payload change, not
-    /// one actuator's fault. Zero for actuators without such a group.
-    fn common_mode(&self, raw: &[f64], j: usize) -> f64 {
-        let g = self.groups[j];
-        let mut v = [0.0; crate::model::MAX_ACTUATORS];
-        let mut n = 0;
-        for (k, e) in raw.iter().enumerate() {
-            if self.groups[k] == g {
-                v[n] = *e;
-                n += 1;
-            }
-        }
-        if n < 3 {
-            return 0.0;
-        }
-        let v = &mut v[..n];
-        v.sort_by(f64::total_cmp);
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            0.5 * (v[n / 2 - 1] + v[n / 2])
+            motors,
         }
     }
 
     /// Attribute the deviations `e` (one per actuator) in the observable space `v = Σ b_j e_j`
     /// by orthogonal matching pursuit: the actuator whose effect explains most of what is still
     /// unexplained joins the explanation, all joined ones are refitted together, and this stops
-    /// when the next one's share would be under half the fault threshold. Joined actuators get
+    /// when the next one's share would be under `explain_min`. Joined actuators get
     /// their fitted deviation, the others their share of the remainder.
     fn explain(&self, e: &[f64], out: &mut [f64]) {
         const MAX_JOINED: usize = 4;
@@ -316,6 +297,8 @@ impl Diagnoser {
             if n > 0.0 { dot(bj, r) / n } else { 0.0 }
         };
         let mut joined = [0usize; MAX_JOINED];
+        // Orthonormal basis of the joined effects (Gram-Schmidt).
+        let mut basis = [[0.0; 4]; MAX_JOINED];
         let mut x = [0.0; MAX_JOINED];
         let mut k = 0;
         let mut rest = v;
@@ -328,8 +311,27 @@ impl Diagnoser {
                         .total_cmp(&(q.1 * q.1 * dot(&b[q.0], &b[q.0])))
                 });
             let Some((j, sj)) = cand else { break };
-            if k > 0 && sj.abs() < 0.5 * self.params.threshold {
+            // Also the first: what no single actuator explains enough of is model error.
+            if sj.abs() < self.params.explain_min {
                 break;
+            }
+            // A further actuator joins only with an effect largely its own: two opposite motors
+            // (nearly opposite effects) fitted together can produce almost any thrust-only
+            // pattern with large, cancelling deviations, which is how model error looks.
+            let mut own = b[j];
+            for q in &basis[..k] {
+                let c = dot(q, &b[j]);
+                for i in 0..4 {
+                    own[i] -= c * q[i];
+                }
+            }
+            let own_sq = dot(&own, &own);
+            if own_sq < MIN_OWN_FRACTION * dot(&b[j], &b[j]) {
+                break;
+            }
+            let norm = own_sq.sqrt();
+            for i in 0..4 {
+                basis[k][i] = own[i] / norm;
             }
             joined[k] = j;
             k += 1;
@@ -397,9 +399,25 @@ impl Diagnoser {
         }
         let mut explained = [[0.0; crate::model::MAX_ACTUATORS]; 2];
         for (x, r) in explained.iter_mut().zip(&raw) {
-            let mut e = [0.0; crate::model::MAX_ACTUATORS];
-            for j in 0..l {
-                e[j] = r[j] - self.common_mode(&r[..l], j);
+            // Three or more motors moving together is thrust mismatch (a payload, a sagging
+            // battery, 10 % less effectiveness than the profile says), not one motor's fault.
+            let mut e = *r;
+            if !self.motors.is_empty() {
+                let mut m = [0.0; crate::model::MAX_ACTUATORS];
+                for (slot, &j) in m.iter_mut().zip(&self.motors) {
+                    *slot = r[j];
+                }
+                let m = &mut m[..self.motors.len()];
+                m.sort_by(f64::total_cmp);
+                let n = m.len();
+                let median = if n % 2 == 1 {
+                    m[n / 2]
+                } else {
+                    0.5 * (m[n / 2 - 1] + m[n / 2])
+                };
+                for &j in &self.motors {
+                    e[j] -= median;
+                }
             }
             self.explain(&e[..l], &mut x[..l]);
         }

@@ -287,7 +287,12 @@ pub fn describe(d: &Decision) -> String {
 impl MonitorFiles {
     fn record(&mut self, d: &Decision) {
         if self.echo {
-            println!("{}", describe(d));
+            use std::io::Write as _;
+            // The echo is a convenience copy (the decisions file keeps every record): if the
+            // terminal or pipe is gone, stop echoing rather than fail.
+            if writeln!(std::io::stdout(), "{}", describe(d)).is_err() {
+                self.echo = false;
+            }
         }
         if let Some(w) = self.decisions.as_mut() {
             let r = w.write(d);

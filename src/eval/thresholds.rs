@@ -1,0 +1,160 @@
+//! Monte-Carlo calibration of a vehicle's decision threshold on healthy flights (issue 4:
+//! "thresholds calibrated on healthy Monte-Carlo sims, not tuned to the fault scenarios").
+//!
+//! Each healthy scenario is flown with seeds the tests and `eval` do not use; every step's
+//! attributed deviation of every actuator and filter is kept after the warm-up. For each such
+//! trace the smallest threshold at which the diagnosis' CUSUM would never alarm is found by
+//! bisection (the CUSUM only falls as the threshold rises); the largest over traces, times a
+//! margin, is the vehicle's threshold.
+
+use super::EvalError;
+use super::vehicle::{StepSink, run_vehicle_scenario};
+use crate::diagnose::vehicle::{Decision, DiagnosisParams};
+use crate::estimate::vehicle::AhcEstimate;
+use crate::scenario::NamedScenario;
+use crate::sim::vehicle::VehicleSample;
+use crate::telemetry::Profile;
+use rayon::prelude::*;
+
+/// First seed of the calibration flights: far from the scenarios' own seeds (1, 2, ...), which
+/// the tests and the README's eval use, so the threshold is judged on flights it never saw.
+pub const CALIBRATION_FIRST_SEED: u64 = 1001;
+/// Factor between the largest alarm-free threshold seen and the one recommended.
+pub const MARGIN: f64 = 1.25;
+
+/// The calibration of one healthy scenario.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ThresholdCalibration {
+    pub scenario: String,
+    pub vehicle: String,
+    pub seeds: Vec<u64>,
+    /// Per filter (MIT-UKF, MIT-ESMF): the smallest threshold with no alarm on any flight.
+    pub alarm_free: [f64; 2],
+    /// Per filter: the largest |deviation| seen after the warm-up.
+    pub max_abs_deviation: [f64; 2],
+    /// `MARGIN` × the larger of `alarm_free`.
+    pub recommended: f64,
+}
+
+/// The smallest threshold at which `S ← max(0, S + (|e|/threshold − 1) dt)` stays at or below
+/// `h` over the whole trace.
+pub fn alarm_free_threshold(trace: &[f32], dt: f64, h: f64) -> f64 {
+    let alarms = |th: f64| {
+        let mut s = 0.0;
+        trace.iter().any(|&e| {
+            s = (s + (f64::from(e).abs() / th - 1.0) * dt).max(0.0);
+            s > h
+        })
+    };
+    let (mut lo, mut hi) = (1e-4, 1e-4);
+    while alarms(hi) {
+        hi *= 2.0;
+        if hi > 1e3 {
+            return f64::INFINITY;
+        }
+    }
+    if !alarms(lo) {
+        return lo;
+    }
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if alarms(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+/// Keeps every step's deviations after the warm-up: `traces[filter][actuator]`.
+struct Collect {
+    warmup_s: f64,
+    traces: [Vec<Vec<f32>>; 2],
+}
+
+impl StepSink for Collect {
+    fn step(&mut self, s: &VehicleSample, est: &[&[AhcEstimate]; 2], _: &Profile) {
+        if s.t < self.warmup_s {
+            return;
+        }
+        for (f, row) in est.iter().enumerate() {
+            if self.traces[f].len() < row.len() {
+                self.traces[f].resize(row.len(), Vec::new());
+            }
+            for (j, e) in row.iter().enumerate() {
+                self.traces[f][j].push(e.deviation as f32);
+            }
+        }
+    }
+    fn decision(&mut self, _: &Decision) {}
+}
+
+/// Fly `named` (a healthy vehicle scenario) with `seeds` and calibrate its threshold.
+pub fn calibrate_threshold(
+    named: &NamedScenario,
+    seeds: &[u64],
+) -> Result<ThresholdCalibration, EvalError> {
+    let params = DiagnosisParams::default();
+    if named.scenario.first_fault().is_some() {
+        return Err(EvalError::Sim(
+            named.name.clone(),
+            "has a fault: thresholds are calibrated on healthy flights only".into(),
+        ));
+    }
+    let dt = named.scenario.dt();
+    let per_seed: Vec<Result<[(f64, f64); 2], EvalError>> = seeds
+        .par_iter()
+        .map(|&seed| {
+            let mut sink = Collect {
+                warmup_s: params.warmup_s,
+                traces: [vec![], vec![]],
+            };
+            run_vehicle_scenario(named, seed, false, &mut sink)?;
+            let mut out = [(0.0f64, 0.0f64); 2];
+            for (f, slot) in out.iter_mut().enumerate() {
+                for tr in &sink.traces[f] {
+                    slot.0 = slot.0.max(alarm_free_threshold(tr, dt, params.cusum_h_s));
+                    let m = tr.iter().fold(0.0f64, |a, &e| a.max(f64::from(e).abs()));
+                    slot.1 = slot.1.max(m);
+                }
+            }
+            Ok(out)
+        })
+        .collect();
+    let mut alarm_free = [0.0f64; 2];
+    let mut max_abs_deviation = [0.0f64; 2];
+    for r in per_seed {
+        let r = r?;
+        for f in 0..2 {
+            alarm_free[f] = alarm_free[f].max(r[f].0);
+            max_abs_deviation[f] = max_abs_deviation[f].max(r[f].1);
+        }
+    }
+    Ok(ThresholdCalibration {
+        scenario: named.name.clone(),
+        vehicle: named.scenario.vehicle.clone(),
+        seeds: seeds.to_vec(),
+        alarm_free,
+        max_abs_deviation,
+        recommended: MARGIN * alarm_free[0].max(alarm_free[1]),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn alarm_free_threshold_is_the_cusum_boundary() {
+        // 0.5 s at 0.1, else 0: the CUSUM at threshold th gains (0.1/th - 1) x 0.5 s.
+        let mut tr = vec![0.0f32; 100];
+        tr.extend(vec![0.1f32; 25]);
+        tr.extend(vec![0.0f32; 100]);
+        let th = alarm_free_threshold(&tr, 0.02, 0.25);
+        // (0.1/th - 1) * 0.5 = 0.25  ->  th = 0.1 / 1.5
+        assert!((th - 0.1 / 1.5).abs() < 1e-3, "{th}");
+        let s_at = |th: f64| (0.1 / th - 1.0) * 0.5;
+        assert!(s_at(th * 1.01) <= 0.25 && s_at(th * 0.99) > 0.25);
+    }
+}
