@@ -396,6 +396,7 @@ impl VehiclePipeline {
                 for f in 0..2 {
                     for j in 0..r.l {
                         r.est[f][j].deviation = r.diag.deviation(f, j);
+                        r.est[f][j].excursion = r.diag.excursion(f, j);
                     }
                 }
                 let views = [&r.est[0][..r.l], &r.est[1][..r.l]];

@@ -207,6 +207,8 @@ struct Channel {
     /// Slope regression of delta over the window (for `drift`): exponential sums.
     last: AhcEstimate,
     e: f64,
+    /// The attributed deviation in the command's excursions (see `update`).
+    excursion: f64,
 }
 
 /// The actuator-level state across filters.
@@ -274,6 +276,38 @@ impl Diagnoser {
             effects,
             motors,
         }
+    }
+
+    /// Three or more motors moving together is thrust mismatch (a payload, a sagging battery,
+    /// 10 % less effectiveness than the profile says), not one motor's fault: their median is
+    /// taken out.
+    fn without_thrust_mismatch(
+        &self,
+        r: &[f64; crate::model::MAX_ACTUATORS],
+        l: usize,
+    ) -> [f64; crate::model::MAX_ACTUATORS] {
+        let mut e = *r;
+        if self.motors.is_empty() {
+            return e;
+        }
+        let mut m = [0.0; crate::model::MAX_ACTUATORS];
+        for (slot, &j) in m.iter_mut().zip(&self.motors) {
+            *slot = r[j];
+        }
+        let m = &mut m[..self.motors.len()];
+        m.sort_by(f64::total_cmp);
+        let n = m.len();
+        let median = if n % 2 == 1 {
+            m[n / 2]
+        } else {
+            0.5 * (m[n / 2 - 1] + m[n / 2])
+        };
+        for &j in &self.motors {
+            if j < l {
+                e[j] -= median;
+            }
+        }
+        e
     }
 
     /// Attribute the deviations `e` (one per actuator) in the observable space `v = Σ b_j e_j`
@@ -369,6 +403,12 @@ impl Diagnoser {
         self.actuators[j].channels[filter].e
     }
 
+    /// The attributed deviation in the command's excursions, `(gamma - 1) σ_u` as the
+    /// measurements attribute it.
+    pub fn excursion(&self, filter: usize, j: usize) -> f64 {
+        self.actuators[j].channels[filter].excursion
+    }
+
     pub fn active(&self, j: usize) -> Option<FaultClass> {
         self.actuators[j].active
     }
@@ -387,39 +427,26 @@ impl Diagnoser {
         let a = (self.dt / p.window_s).min(1.0);
         let warm = t - t0 >= p.warmup_s;
         let l = self.actuators.len();
-        // Raw deviations first, then the common mode of each group of like actuators removed.
-        let mut raw = [[0.0; crate::model::MAX_ACTUATORS]; 2];
+        // Per actuator and filter two deviations of the effective output over the window: at
+        // the operating point, `(gamma - 1) ū + delta`, and in the command's excursions about
+        // it, `(gamma - 1) σ_u` (a surface's gain fault near trim shows only there).
+        let mut raw = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 2];
         for j in 0..l {
             let st = &mut self.actuators[j];
             st.u.push(u[j], a);
+            let sigma_u = st.u.var.max(0.0).sqrt();
             for f in 0..2 {
                 let e = est[f][j];
-                raw[f][j] = (e.gamma - 1.0) * st.u.mean + e.delta;
+                raw[0][f][j] = (e.gamma - 1.0) * st.u.mean + e.delta;
+                raw[1][f][j] = (e.gamma - 1.0) * sigma_u;
             }
         }
-        let mut explained = [[0.0; crate::model::MAX_ACTUATORS]; 2];
-        for (x, r) in explained.iter_mut().zip(&raw) {
-            // Three or more motors moving together is thrust mismatch (a payload, a sagging
-            // battery, 10 % less effectiveness than the profile says), not one motor's fault.
-            let mut e = *r;
-            if !self.motors.is_empty() {
-                let mut m = [0.0; crate::model::MAX_ACTUATORS];
-                for (slot, &j) in m.iter_mut().zip(&self.motors) {
-                    *slot = r[j];
-                }
-                let m = &mut m[..self.motors.len()];
-                m.sort_by(f64::total_cmp);
-                let n = m.len();
-                let median = if n % 2 == 1 {
-                    m[n / 2]
-                } else {
-                    0.5 * (m[n / 2 - 1] + m[n / 2])
-                };
-                for &j in &self.motors {
-                    e[j] -= median;
-                }
+        let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 2];
+        for (xs, rs) in explained.iter_mut().zip(&raw) {
+            for (x, r) in xs.iter_mut().zip(rs) {
+                let e = self.without_thrust_mismatch(r, l);
+                self.explain(&e[..l], &mut x[..l]);
             }
-            self.explain(&e[..l], &mut x[..l]);
         }
         for j in 0..l {
             let st = &mut self.actuators[j];
@@ -427,8 +454,9 @@ impl Diagnoser {
                 let e = est[f][j];
                 let ch = &mut st.channels[f];
                 ch.last = e;
-                ch.e = explained[f][j];
-                let ratio = ch.e.abs() / p.threshold;
+                ch.e = explained[0][f][j];
+                ch.excursion = explained[1][f][j];
+                let ratio = explained[0][f][j].hypot(explained[1][f][j]) / p.threshold;
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
                 if !warm {
                     ch.cusum = 0.0;

@@ -34,6 +34,9 @@ pub struct AhcEstimate {
     /// to this actuator (filled in by the diagnosis; see `diagnose::vehicle`). Unlike
     /// `(gamma - 1) u + delta` it does not wander along what the measurements cannot see.
     pub deviation: f64,
+    /// The same for the command's excursions about the operating point, `(gamma - 1) σ_u`:
+    /// the detection statistic is `hypot(deviation, excursion)`.
+    pub excursion: f64,
 }
 
 impl AhcEstimate {
@@ -304,6 +307,7 @@ fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
         q_gamma: q[gi],
         q_delta: q[di],
         deviation: 0.0,
+        excursion: 0.0,
     }
 }
 

@@ -30,7 +30,7 @@ pub struct ThresholdCalibration {
     pub seeds: Vec<u64>,
     /// Per filter (MIT-UKF, MIT-ESMF): the smallest threshold with no alarm on any flight.
     pub alarm_free: [f64; 2],
-    /// Per filter: the largest |deviation| seen after the warm-up.
+    /// Per filter: the largest detection statistic seen after the warm-up.
     pub max_abs_deviation: [f64; 2],
     /// `MARGIN` × the larger of `alarm_free`.
     pub recommended: f64,
@@ -83,7 +83,7 @@ impl StepSink for Collect {
                 self.traces[f].resize(row.len(), Vec::new());
             }
             for (j, e) in row.iter().enumerate() {
-                self.traces[f][j].push(e.deviation as f32);
+                self.traces[f][j].push(e.deviation.hypot(e.excursion) as f32);
             }
         }
     }

@@ -113,11 +113,22 @@ pub fn run_vehicle_scenario(
         for (f, row) in est.iter_mut().enumerate() {
             for (j, e) in row[..l].iter_mut().enumerate() {
                 e.deviation = diag.deviation(f, j);
+                e.excursion = diag.excursion(f, j);
             }
         }
         let views = [&est[0][..l], &est[1][..l]];
         for d in &new_decisions {
             sink.decision(d);
+            // As the live pipeline does: a decided fault makes both filters forget what they
+            // knew about that actuator's gain and bias.
+            if d.event == Event::Fault
+                && let Some(j) = d
+                    .actuator
+                    .as_deref()
+                    .and_then(|a| profile.actuator_index(a))
+            {
+                filters.forget(j);
+            }
         }
         decisions.append(&mut new_decisions);
         sink.step(&s, &views, &profile);
