@@ -702,12 +702,16 @@ fn calibrate(
     let mut found = None;
     while let Some((_, frame)) = reader.next_frame().map_err(input_error)? {
         monitor.on_frame(&frame, &mut files);
-        if let Some((sysid, p)) = monitor.pipelines.iter().find(|(_, p)| p.fit.is_some()) {
-            found = Some((*sysid, p.profile().cloned(), p.fit.clone()));
+        if let Some((sysid, p)) = monitor
+            .pipelines
+            .iter()
+            .find(|(_, p)| p.fit.is_some() || p.arx.is_some())
+        {
+            found = Some((*sysid, p.profile().cloned(), p.fit.clone(), p.arx.clone()));
             break;
         }
     }
-    let Some((sysid, Some(mut calibrated), Some(fit))) = found else {
+    let Some((sysid, Some(mut calibrated), fit, arx)) = found else {
         return Err(UsageError(format!(
             "{}: no airborne stretch of a vehicle ended before t = {until} s (vehicle time); nothing to calibrate",
             file.display()
@@ -717,25 +721,43 @@ fn calibrate(
     let base = calibrated.name.clone();
     calibrated.name = format!("{base}-calibrated");
     let axes = ["roll", "pitch", "yaw", "a_z"];
-    let quality: Vec<String> = fit
-        .quality
-        .r_squared
-        .iter()
-        .zip(&fit.scaled)
-        .enumerate()
-        .map(|(i, (r2, scaled))| {
-            format!(
-                "{} {} R2 {:.2}",
-                axes[i],
-                if *scaled { "fitted" } else { "offset only" },
-                r2
-            )
-        })
-        .collect();
+    let (samples, quality): (usize, Vec<String>) = match (&fit, &arx) {
+        (Some(fit), _) => (
+            fit.quality.samples,
+            fit.quality
+                .r_squared
+                .iter()
+                .zip(&fit.scaled)
+                .enumerate()
+                .map(|(i, (r2, scaled))| {
+                    format!(
+                        "{} {} R2 {:.2}",
+                        axes[i],
+                        if *scaled { "fitted" } else { "offset only" },
+                        r2
+                    )
+                })
+                .collect(),
+        ),
+        (None, Some(arx)) => (
+            arx.quality.samples,
+            arx.quality
+                .r_squared
+                .iter()
+                .enumerate()
+                .map(|(i, r2)| format!("{} increment R2 {:.2}", axes[i], r2))
+                .chain(std::iter::once(format!(
+                    "command delay {} samples",
+                    arx.params.delay
+                )))
+                .collect(),
+        ),
+        (None, None) => unreachable!("found only with a fit"),
+    };
     calibrated.description = format!(
         "{base} identified from {} (sysid {sysid}), healthy stretch of {} samples ending at t = {until} s: {}",
         file.display(),
-        fit.quality.samples,
+        samples,
         quality.join(", ")
     );
     let text = toml::to_string(&calibrated).context("cannot serialise the profile")?;

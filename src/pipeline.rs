@@ -121,6 +121,8 @@ pub struct VehiclePipeline {
     airborne_since: Option<f64>,
     pub detection: Option<Detection>,
     pub fit: Option<ScaledFit>,
+    /// The identified discrete model, for `dynamics = "arx"` profiles.
+    pub arx: Option<crate::model::calibrate::ArxFit>,
     pub counters: PipelineCounters,
     /// Last estimates (vehicle time, per filter and actuator), for summaries and dashboards.
     pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
@@ -158,6 +160,7 @@ impl VehiclePipeline {
             airborne_since: None,
             detection: None,
             fit: None,
+            arx: None,
             counters: PipelineCounters::default(),
             last: None,
             last_sample_t: None,
@@ -500,7 +503,8 @@ impl VehiclePipeline {
                 (arx.params.delay as f64 * dt * 1e3).round(),
                 parts.join(", ")
             );
-            calibrated.model.arx = Some(arx.params);
+            calibrated.model.arx = Some(arx.params.clone());
+            self.arx = Some(arx);
             (calibrated, None, summary)
         } else {
             let fit = match calibrate_scaled(&shifted, dt, &base) {
