@@ -227,6 +227,10 @@ struct ActuatorState {
     class_candidate: Option<(FaultClass, f64)>,
 }
 
+/// Weight of a motor's positive deviation (more thrust than commanded) when choosing who
+/// explains the measurements (see `explain`).
+const MOTOR_EXCESS_PRIOR: f64 = 0.5;
+
 /// Squared fraction of a further actuator's effect that must be independent of the effects
 /// already joined in `explain` (0.25: at least half its norm).
 const MIN_OWN_FRACTION: f64 = 0.25;
@@ -248,6 +252,7 @@ pub struct Diagnoser {
     effects: Vec<[f64; 4]>,
     /// The motors, when there are three or more: their median deviation is thrust mismatch.
     motors: Vec<usize>,
+    is_motor: Vec<bool>,
 }
 
 impl Diagnoser {
@@ -255,6 +260,11 @@ impl Diagnoser {
         let names = profile.actuator_names();
         let channels = profile.actuators.iter().map(|a| a.channel).collect();
         let effects = crate::estimate::vehicle::weighted_effects(profile, dt);
+        let is_motor: Vec<bool> = profile
+            .actuators
+            .iter()
+            .map(|a| a.role == Role::Motor)
+            .collect();
         let mut motors: Vec<usize> = (0..effects.len())
             .filter(|&j| profile.actuators[j].role == Role::Motor)
             .collect();
@@ -275,6 +285,7 @@ impl Diagnoser {
             t0: None,
             effects,
             motors,
+            is_motor,
         }
     }
 
@@ -337,13 +348,22 @@ impl Diagnoser {
         let mut k = 0;
         let mut rest = v;
         while k < MAX_JOINED.min(l) {
+            // Explained energy, with the motors' prior: a motor that loses thrust is common, one
+            // that gives more than commanded is rare. It matters where two explanations fit
+            // equally: on a hexacopter one motor's loss and the opposite motor's excess differ
+            // only in the (noisy) vertical specific force.
+            let energy = |j: usize, sj: f64| -> f64 {
+                let e = sj * sj * dot(&b[j], &b[j]);
+                if sj > 0.0 && self.is_motor[j] {
+                    e * MOTOR_EXCESS_PRIOR
+                } else {
+                    e
+                }
+            };
             let cand = (0..l)
                 .filter(|j| !joined[..k].contains(j))
                 .map(|j| (j, share(&b[j], &rest)))
-                .max_by(|p, q| {
-                    (p.1 * p.1 * dot(&b[p.0], &b[p.0]))
-                        .total_cmp(&(q.1 * q.1 * dot(&b[q.0], &b[q.0])))
-                });
+                .max_by(|p, q| energy(p.0, p.1).total_cmp(&energy(q.0, q.1)));
             let Some((j, sj)) = cand else { break };
             // Also the first: what no single actuator explains enough of is model error.
             if sj.abs() < self.params.explain_min {
