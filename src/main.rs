@@ -30,6 +30,20 @@ macro_rules! outln {
     }};
 }
 
+/// `print!` with the same handling as `outln!`.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = write!(std::io::stdout(), $($arg)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            eprintln!("ahcmon: cannot write to stdout: {e}");
+            std::process::exit(1);
+        }
+    }};
+}
+
 #[derive(Parser)]
 #[command(
     name = "ahcmon",
@@ -660,7 +674,7 @@ fn monitor(
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
     }
-    print!("{}", summary::render(&monitor, &counters.link, &files.seen));
+    out!("{}", summary::render(&monitor, &counters.link, &files.seen));
     if counters.backpressure_drops > 0 {
         outln!(
             "{} frames dropped: the estimators fell behind",
@@ -874,7 +888,7 @@ fn replay(
             .with_context(|| format!("cannot write {}", p.display()))?;
         eprintln!("plot written to {}", p.display());
     }
-    print!(
+    out!(
         "{}",
         summary::render(&monitor, &reader.counters, &files.seen)
     );
@@ -1025,7 +1039,7 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
     if json {
         outln!("{}", table::to_json(&rows));
     } else {
-        print!("{}", table::render(&rows));
+        out!("{}", table::render(&rows));
         if let Some(dir) = &plot {
             outln!("plots written to {}", dir.display());
         }

@@ -64,7 +64,7 @@ struct StoredSample {
 }
 
 /// Commands kept for an identified model's delay (samples).
-const U_HISTORY: usize = 8;
+const U_HISTORY: usize = crate::telemetry::profile::MAX_ARX_DELAY + 1;
 /// Longest command delay the identification considers (s).
 const MAX_DELAY_S: f64 = 0.12;
 
@@ -132,8 +132,20 @@ pub struct VehiclePipeline {
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
 }
 
-fn mean_square(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64
+/// The calibrated profile's rate and noise levels: the process noise from what the model could
+/// not explain on the healthy stretch (rates, then a_z), but never below the profile's: a calm
+/// stretch (a still hover) would otherwise make the filters trust the model more than any
+/// manoeuvre or fault transient deserves.
+fn set_noise_from_fit(calibrated: &mut Profile, residual_std: &[f64], dt: f64) {
+    calibrated.rate_hz = (1e3 / dt).round() / 1e3;
+    let rates = &residual_std[..3.min(residual_std.len())];
+    let rate_sd = (rates.iter().map(|x| x * x).sum::<f64>() / rates.len().max(1) as f64).sqrt();
+    calibrated.noise.rate_process = rate_sd.max(calibrated.noise.rate_process);
+    if calibrated.model.measure_az
+        && let Some(sd) = residual_std.get(3)
+    {
+        calibrated.noise.az = sd.max(calibrated.noise.az);
+    }
 }
 
 fn median_interval(ts: impl Iterator<Item = f64>) -> f64 {
@@ -336,10 +348,15 @@ impl VehiclePipeline {
                 let Some(prev_u) = r.prev_u.replace(u) else {
                     r.last_t = s.t;
                     r.u_pushed = 0;
+                    r.rates_prev = [s.rates; 2];
                     return;
                 };
                 if s.t - r.last_t > 5.0 * r.dt {
                     self.counters.gaps += 1;
+                    // What came before the gap is no longer the previous step: no delayed
+                    // commands from it (the oldest known stands in) and no increment across it.
+                    r.u_pushed = 0;
+                    r.rates_prev = [r.rates_prev[1]; 2];
                 }
                 r.last_t = s.t;
                 // The outputs sent at the previous instant act until this one.
@@ -465,25 +482,27 @@ impl VehiclePipeline {
             .filter(|c| !profile.model.measure_az || c.az.is_some())
             .collect();
         let base = profile.rate_params();
-        let (calibrated, fit, summary) = if profile.model.dynamics == Dynamics::Arx {
+        let identified = if profile.model.dynamics == Dynamics::Arx {
+            // Above ~58 Hz the history, not MAX_DELAY_S, bounds the delay searched.
             let max_delay = ((MAX_DELAY_S / dt).round() as usize).min(U_HISTORY - 1);
-            let arx = match calibrate_arx(&shifted, dt, max_delay, &base) {
-                Ok(f) => f,
+            match calibrate_arx(&shifted, dt, max_delay, &base) {
+                Ok(f) => Some(f),
                 Err(e) => {
-                    sink.message(self.sysid, &format!("error: calibration failed: {e}"));
-                    self.stage = Stage::Failed;
-                    return;
+                    sink.message(
+                        self.sysid,
+                        &format!(
+                            "warning: the identified model failed ({e}); using the profile's geometry, scaled per axis"
+                        ),
+                    );
+                    None
                 }
-            };
-            let mut calibrated = profile.clone();
-            calibrated.rate_hz = (1e3 / dt).round() / 1e3;
-            let rate_sd = mean_square(&arx.quality.residual_std[..3]);
-            calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
-            if calibrated.model.measure_az
-                && let Some(sd) = arx.quality.residual_std.get(3)
-            {
-                calibrated.noise.az = sd.max(profile.noise.az);
             }
+        } else {
+            None
+        };
+        let (calibrated, fit, summary) = if let Some(arx) = identified {
+            let mut calibrated = profile.clone();
+            set_noise_from_fit(&mut calibrated, &arx.quality.residual_std, dt);
             let axes = ["roll", "pitch", "yaw", "a_z"];
             let mut parts: Vec<String> = arx.quality.r_squared[..3]
                 .iter()
@@ -516,17 +535,7 @@ impl VehiclePipeline {
                 }
             };
             let mut calibrated = profile.with_rate_params(&fit.params);
-            calibrated.rate_hz = (1e3 / dt).round() / 1e3;
-            // Process noise from what the model could not explain on the healthy stretch, but
-            // never below the profile's: a calm stretch (a still hover) would otherwise make the
-            // filters trust the model more than any manoeuvre or fault transient deserves.
-            let rate_sd = mean_square(&fit.quality.residual_std[..3]);
-            calibrated.noise.rate_process = rate_sd.sqrt().max(profile.noise.rate_process);
-            if calibrated.model.measure_az
-                && let Some(sd) = fit.quality.residual_std.get(3)
-            {
-                calibrated.noise.az = sd.max(profile.noise.az);
-            }
+            set_noise_from_fit(&mut calibrated, &fit.quality.residual_std, dt);
             let axes = ["roll", "pitch", "yaw", "a_z"];
             let summary: Vec<String> = fit
                 .scaled

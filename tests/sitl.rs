@@ -63,14 +63,13 @@ fn is_fault(d: &Decision) -> bool {
     matches!(d.event, Event::Fault | Event::Changed)
 }
 
-#[test]
-fn quadx_maneuvers_motor4_gain_fault() {
-    // SOURCE.md: fault on at time_boot_ms 98604, off at 128625; motor 4, gamma 0.7.
-    let (on, off) = (98.604, 128.625);
-    let c = replay(
-        "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
-        None,
-    );
+/// The fault decisions of a log, after checking that none comes before the onset and that
+/// none names another actuator; and the first on which both filters agree.
+fn only_faults_on<'a>(
+    c: &'a Collect,
+    on: f64,
+    actuator: &str,
+) -> (Vec<&'a Decision>, &'a Decision) {
     let faults: Vec<&Decision> = c.decisions.iter().filter(|d| is_fault(d)).collect();
     assert!(
         faults.iter().all(|d| d.t >= on),
@@ -79,14 +78,26 @@ fn quadx_maneuvers_motor4_gain_fault() {
     assert!(
         faults
             .iter()
-            .all(|d| d.actuator.as_deref() == Some("motor4")),
+            .all(|d| d.actuator.as_deref() == Some(actuator) && d.also.is_empty()),
         "another actuator flagged: {faults:?}"
     );
-    // Isolated by both filters within 2 s.
-    let both = faults
+    let both = *faults
         .iter()
         .find(|d| d.filters.len() == 2)
-        .expect("both filters agree");
+        .unwrap_or_else(|| panic!("both filters isolate {actuator}: {faults:?}"));
+    (faults, both)
+}
+
+#[test]
+fn quadx_maneuvers_motor4_gain_fault() {
+    // SOURCE.md: fault on at time_boot_ms 98604, off at 128625; motor 4, gamma 0.7.
+    let (on, off) = (98.604, 128.625);
+    let c = replay(
+        "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+        None,
+    );
+    // Isolated by both filters within 2 s, nothing else flagged.
+    let (_, both) = only_faults_on(&c, on, "motor4");
     assert!(both.t - on <= 2.0, "both filters at +{:.2} s", both.t - on);
     // MIT-UKF gamma within 0.1 of 0.7 from 5 s after the onset until the fault is removed.
     let j = 3;
@@ -168,21 +179,7 @@ fn heli_hover_servo1_gain_fault() {
         "sitl_heli_servo1_gain0p7/arducopter-heli_sitl_servo1_mul0.7.tlog",
         None,
     );
-    let faults: Vec<&Decision> = c.decisions.iter().filter(|d| is_fault(d)).collect();
-    assert!(
-        faults.iter().all(|d| d.t >= on),
-        "false decision before the onset: {faults:?}"
-    );
-    assert!(
-        faults
-            .iter()
-            .all(|d| d.actuator.as_deref() == Some("swash1") && d.also.is_empty()),
-        "another actuator flagged: {faults:?}"
-    );
-    let both = faults
-        .iter()
-        .find(|d| d.filters.len() == 2)
-        .expect("both filters isolate swash1");
+    let (_, both) = only_faults_on(&c, on, "swash1");
     assert!(both.t - on <= 5.0, "both filters at +{:.2} s", both.t - on);
     // Truth: the physics sees (pwm - 1000) * 0.7 + 1000; about the 1500 µs trim with a 400 µs
     // half-range that is gamma 0.7, delta -0.375. The controller holds servo 1 at 1858 ± 25 µs
@@ -234,21 +231,7 @@ fn heli_maneuvers_servo3_gain_fault() {
         "sitl_heli_maneuvers_servo3_gain0p75/sitl_heli_maneuvers_servo3_gain0p75.tlog",
         None,
     );
-    let faults: Vec<&Decision> = c.decisions.iter().filter(|d| is_fault(d)).collect();
-    assert!(
-        faults.iter().all(|d| d.t >= on),
-        "false decision in the healthy manoeuvring: {faults:?}"
-    );
-    assert!(
-        faults
-            .iter()
-            .all(|d| d.actuator.as_deref() == Some("swash3") && d.also.is_empty()),
-        "another actuator flagged: {faults:?}"
-    );
-    let both = faults
-        .iter()
-        .find(|d| d.filters.len() == 2)
-        .expect("both filters isolate swash3");
+    let (_, both) = only_faults_on(&c, on, "swash3");
     assert!(both.t - on <= 2.0, "both filters at +{:.2} s", both.t - on);
     // The manoeuvres move servo 3 enough to separate gain and bias: its MIT-UKF gamma within
     // 0.1 of 0.75 from 5 s after the onset until the removal.

@@ -1,24 +1,30 @@
 //! Per-vehicle, per-actuator decisions from the two monitoring filters (estimators.md §4).
 //!
-//! The detection statistic is the actuator's *effective output deviation at its operating
-//! point*, `e_j = (gamma_j - 1) ū_j + delta_j` (ū_j the command averaged over a short window).
-//! In steady flight gamma and delta are nearly collinear (only `gamma ū + delta` is observed),
-//! so each wanders along that line while `e_j` stays well determined; gamma and delta apart are
-//! only used to classify, and only when the command has varied enough to separate them
-//! (otherwise `excitation_low` is emitted instead of a guess).
+//! The statistics are deviations of an actuator's *effective output* over a short window: at
+//! its operating point, `(gamma_j - 1) ū_j + delta_j` (ū_j the windowed mean command), and in the
+//! command's excursions about it, `(gamma_j - 1) σ_u,j`. In steady flight gamma and delta are
+//! nearly collinear (only `gamma ū + delta` is observed), so each wanders along that line while
+//! the deviation stays well determined; gamma and delta apart are only used to classify, and
+//! only when the command has varied enough to separate them (otherwise `excitation_low` is
+//! emitted instead of a guess). Three or more motors moving together (their median) is thrust
+//! mismatch and is removed first.
 //!
-//! Isolation works in the space of what the filters can observe. The estimated deviations map
-//! to an effect on the measurements, `v = Σ_j b_j e_j` (`b_j` the actuator's weighted effect per
-//! step); the actuator whose single effect explains most of `v` is the candidate and gets
-//! `x = b_jᵀv / |b_j|²`, and the others are judged on what it leaves unexplained. Deviations
-//! the measurements cannot see (a helicopter's collective and the tail's compensating pitch,
-//! a hexacopter's motor pairs) then never look like a fault of one actuator, however far the
-//! individual estimates wander along them; a lone fault is attributed whole to its actuator.
+//! Isolation works in the space of what the filters can observe. The deviations map to an
+//! effect on the measurements, `v = Σ_j b_j e_j` (`b_j` the actuator's effect per step, rows
+//! divided by their noise), which `explain` attributes by orthogonal matching pursuit: the
+//! actuator explaining most of what is left joins (a motor's excess counts half: motors fail
+//! low), all joined are refitted together, and a further one joins only with a share of at least
+//! `explain_min` and an effect largely its own. Deviations the measurements cannot see (a
+//! helicopter's collective with the tail's compensation, a hexacopter's opposite motor pairs)
+//! then never look like one actuator's fault, however far the individual estimates wander
+//! along them; a lone fault is attributed whole to its actuator.
 //!
-//! Detection: a CUSUM on `|e_j| / threshold - 1` (units of seconds over threshold), alarm when
-//! it passes `cusum_h_s`; clearing when `|e_j|` has stayed below half the threshold for
-//! `clear_s` (hysteresis). The threshold is calibrated on healthy Monte-Carlo flights with gusts
-//! and model mismatch (`eval`'s healthy scenarios), never on the fault scenarios.
+//! Detection: a CUSUM on `hypot(deviation, excursion) / threshold - 1` (units of seconds over
+//! threshold) per filter, alarm when it passes `cusum_h_s`; clearing when the statistic has
+//! stayed below half the threshold for `clear_s` (hysteresis). Every alarmed actuator is a
+//! fault decision; `also` names the others alarmed at the time. The threshold is calibrated on
+//! healthy Monte-Carlo flights with gusts and model mismatch (`ahcmon thresholds`), never on
+//! the fault scenarios.
 
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::telemetry::{Profile, Role};
@@ -218,7 +224,8 @@ struct ActuatorState {
     channels: [Channel; 2],
     /// The class of the fault in force (None = healthy).
     active: Option<FaultClass>,
-    active_filters: Vec<&'static str>,
+    /// Filters (bit f = `FILTER_NAMES[f]`) that have agreed on the fault in force.
+    active_filters: u8,
     excitation_reported: bool,
     low_for: f64,
     delta_hist: Vec<(f64, f64)>,
@@ -295,7 +302,6 @@ impl Diagnoser {
     fn without_thrust_mismatch(
         &self,
         r: &[f64; crate::model::MAX_ACTUATORS],
-        l: usize,
     ) -> [f64; crate::model::MAX_ACTUATORS] {
         let mut e = *r;
         if self.motors.is_empty() {
@@ -314,9 +320,7 @@ impl Diagnoser {
             0.5 * (m[n / 2 - 1] + m[n / 2])
         };
         for &j in &self.motors {
-            if j < l {
-                e[j] -= median;
-            }
+            e[j] -= median;
         }
         e
     }
@@ -464,7 +468,7 @@ impl Diagnoser {
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 2];
         for (xs, rs) in explained.iter_mut().zip(&raw) {
             for (x, r) in xs.iter_mut().zip(rs) {
-                let e = self.without_thrust_mismatch(r, l);
+                let e = self.without_thrust_mismatch(r);
                 self.explain(&e[..l], &mut x[..l]);
             }
         }
@@ -518,7 +522,7 @@ impl Diagnoser {
                 st.excitation_reported = false;
             } else if st.low_for >= p.window_s && !st.excitation_reported && st.active.is_none() {
                 st.excitation_reported = true;
-                let mut d = self.decision(t, j, Event::ExcitationLow, None, vec![]);
+                let mut d = self.decision(t, j, Event::ExcitationLow, None, 0);
                 d.detail = Some(format!(
                     "command std {:.4} over {} s, gamma std {:.3}: gain and bias not separable",
                     self.actuators[j].u.var.sqrt(),
@@ -527,21 +531,21 @@ impl Diagnoser {
                 ));
                 out.push(d);
             }
-            let filters: Vec<&'static str> = (0..2)
+            // Which filters alarm, as a bit mask: no allocation unless a decision is made.
+            let filters: u8 = (0..2)
                 .filter(|&f| self.actuators[j].channels[f].alarm)
-                .map(|f| FILTER_NAMES[f])
-                .collect();
+                .fold(0, |m, f| m | (1 << f));
             let st = &self.actuators[j];
-            let cleared = st.active.is_some() && (0..2).all(|f| !st.channels[f].alarm);
+            let cleared = st.active.is_some() && filters == 0;
             if cleared {
-                let d = self.decision(t, j, Event::Cleared, None, vec![]);
+                let d = self.decision(t, j, Event::Cleared, None, 0);
                 out.push(d);
                 let st = &mut self.actuators[j];
                 st.active = None;
-                st.active_filters.clear();
+                st.active_filters = 0;
                 continue;
             }
-            if filters.is_empty() {
+            if filters == 0 {
                 continue;
             }
             // Classification needs the command to have moved enough to separate gamma and delta.
@@ -551,15 +555,11 @@ impl Diagnoser {
             } else {
                 FaultClass::Unclassified
             };
-            let also: Vec<String> = (0..l)
-                .filter(|&k| k != j && (0..2).any(|f| self.actuators[k].channels[f].alarm))
-                .map(|k| self.names[k].clone())
-                .collect();
             let st = &self.actuators[j];
             match (st.active, class) {
                 (None, c) => {
-                    let mut d = self.decision(t, j, Event::Fault, Some(c), filters.clone());
-                    d.also = also;
+                    let mut d = self.decision(t, j, Event::Fault, Some(c), filters);
+                    d.also = self.also(j);
                     if c == FaultClass::Unclassified {
                         d.detail = Some(format!(
                             "effective output off by {:+.3} (gamma*u+delta at the operating point); the command has not varied enough (std {:.4}) to tell gain from bias",
@@ -596,15 +596,10 @@ impl Diagnoser {
                         self.actuators[j].class_candidate = None;
                     }
                     let st = &self.actuators[j];
-                    let mut union = st.active_filters.clone();
-                    for f in &filters {
-                        if !union.contains(f) {
-                            union.push(f);
-                        }
-                    }
-                    if c != prev || union.len() != st.active_filters.len() {
-                        let mut d = self.decision(t, j, Event::Changed, Some(c), union.clone());
-                        d.also = also;
+                    let union = st.active_filters | filters;
+                    if c != prev || union != st.active_filters {
+                        let mut d = self.decision(t, j, Event::Changed, Some(c), union);
+                        d.also = self.also(j);
                         out.push(d);
                         let st = &mut self.actuators[j];
                         st.active = Some(c);
@@ -613,6 +608,14 @@ impl Diagnoser {
                 }
             }
         }
+    }
+
+    /// The other actuators alarmed by either filter, by name (a `multiple` isolation).
+    fn also(&self, j: usize) -> Vec<String> {
+        (0..self.actuators.len())
+            .filter(|&k| k != j && self.actuators[k].channels.iter().any(|c| c.alarm))
+            .map(|k| self.names[k].clone())
+            .collect()
     }
 
     fn classify(&self, j: usize) -> FaultClass {
@@ -666,9 +669,13 @@ impl Diagnoser {
         j: usize,
         event: Event,
         class: Option<FaultClass>,
-        filters: Vec<&'static str>,
+        filters: u8,
     ) -> Decision {
         let e = self.actuators[j].channels[0].last;
+        let filters: Vec<&'static str> = (0..2)
+            .filter(|f| filters & (1 << f) != 0)
+            .map(|f| FILTER_NAMES[f])
+            .collect();
         let confidence = match filters.len() {
             0 => 0.0,
             1 => 0.6,
@@ -720,4 +727,66 @@ fn solve_small<const C: usize>(a: &mut [[f64; C]; 4], k: usize) -> Option<[f64; 
         x[r] = acc / a[r][r];
     }
     Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn diagnoser(profile: &str) -> Diagnoser {
+        let p = Profile::resolve(profile).unwrap();
+        Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02)
+    }
+
+    #[test]
+    fn a_lone_deviation_is_attributed_whole_to_its_actuator() {
+        let d = diagnoser("quad-x");
+        let mut out = [0.0; 4];
+        d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out);
+        assert!((out[1] + 0.2).abs() < 1e-9, "{out:?}");
+        for (j, x) in out.iter().enumerate().filter(|(j, _)| *j != 1) {
+            assert!(x.abs() < 1e-9, "actuator {j}: {x}");
+        }
+    }
+
+    #[test]
+    fn two_separate_faults_are_both_attributed() {
+        // Helicopter: swash servo 2 and the tail (independent effects).
+        let d = diagnoser("heli-h3-120");
+        let mut out = [0.0; 4];
+        d.explain(&[0.0, -0.15, 0.0, 0.12], &mut out);
+        assert!(
+            (out[1] + 0.15).abs() < 1e-6 && (out[3] - 0.12).abs() < 1e-6,
+            "{out:?}"
+        );
+    }
+
+    #[test]
+    fn opposite_motors_together_are_not_one_motors_fault() {
+        // Hexa X: motors 5 and 6 sit on opposite arms with opposite spin, so both short by the
+        // same amount is a thrust-only pattern (model error), which any opposite pair fits.
+        let d = diagnoser("hexa-x");
+        let mut out = [0.0; 6];
+        d.explain(&[0.0, 0.0, 0.0, 0.0, -0.3, -0.3], &mut out);
+        assert!(out.iter().all(|x| x.abs() < 0.06), "{out:?}");
+    }
+
+    #[test]
+    fn small_systems_solve_exactly_and_singular_ones_are_refused() {
+        let mut a = [
+            [4.0, 1.0, 9.0, 0.0, 0.0],
+            [1.0, 3.0, 7.0, 0.0, 0.0],
+            [0.0; 5],
+            [0.0; 5],
+        ];
+        let x = solve_small(&mut a, 2).unwrap();
+        assert!((4.0 * x[0] + x[1] - 9.0).abs() < 1e-12 && (x[0] + 3.0 * x[1] - 7.0).abs() < 1e-12);
+        let mut s = [
+            [1.0, 2.0, 1.0, 0.0, 0.0],
+            [2.0, 4.0, 2.0, 0.0, 0.0],
+            [0.0; 5],
+            [0.0; 5],
+        ];
+        assert!(solve_small(&mut s, 2).is_none());
+    }
 }

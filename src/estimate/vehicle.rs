@@ -69,7 +69,8 @@ pub trait VehicleFilters: Send {
     /// previous step's measured rate increment.
     fn inputs(&self) -> usize;
     fn measurements(&self) -> usize;
-    /// One step of both filters. `u.len()` = actuators, `y` = [p, q, r(, a_z)].
+    /// One step of both filters. `u.len()` = [`VehicleFilters::inputs`] (the commands, then for
+    /// an identified model the previous measured rate increment), `y` = [p, q, r(, a_z)].
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2];
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate;
     /// The normalised innovation square (UKF) or `M (1 - consistency)` (ESMF) of the last step.

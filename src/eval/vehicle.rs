@@ -20,6 +20,11 @@ const TRACE_POINTS: usize = 2000;
 pub trait StepSink {
     fn step(&mut self, sample: &VehicleSample, est: &[&[AhcEstimate]; 2], profile: &Profile);
     fn decision(&mut self, d: &Decision);
+    /// A decision threshold to fly with instead of the profile's (the threshold calibration
+    /// flies with none, so that no decision feeds back into the filters it calibrates on).
+    fn threshold(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// A sink that keeps nothing.
@@ -66,11 +71,22 @@ pub fn run_vehicle_scenario(
 ) -> Result<Run, EvalError> {
     let scn = &named.scenario;
     let err = |e: String| EvalError::Sim(named.name.clone(), e);
-    let (cfg, profile) = sim_config(named, seed)?;
+    let (cfg, mut profile) = sim_config(named, seed)?;
+    if let Some(th) = sink.threshold() {
+        profile.diagnosis.threshold = th;
+    }
     let dt = cfg.dt;
     let mut sim = VehicleSim::new(cfg).map_err(err)?;
     let mut filters = build(&profile, dt).map_err(|e| err(e.to_string()))?;
     let l = filters.actuators();
+    if filters.inputs() != l {
+        // An identified model takes delayed commands and measured increments, which only the
+        // telemetry pipeline assembles; the simulator feeds commands and measurements.
+        return Err(err(format!(
+            "profile {} carries an identified model (model.arx); eval flies the profile's geometry model",
+            profile.name
+        )));
+    }
     let m = filters.measurements();
     let names = profile.actuator_names();
     let mut diag = Diagnoser::new(DiagnosisParams::default(), 1, &profile, dt);

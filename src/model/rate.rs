@@ -19,7 +19,9 @@
 //! vehicle whose rate response is not first order (a helicopter's rotor flapping and servo lag)
 //! uses an identified [`ArxParams`] instead: a full `Phi` (cross-axis coupling), full `B`, and
 //! `x_k` the *measured* angular increment of the previous step (`y_k - y_{k-1}`), passed as
-//! three extra inputs after the actuators' commands.
+//! three extra inputs after the actuators' commands; `u_k` is then the command the
+//! identification found acting now, i.e. the one sent `delay` samples earlier (the caller
+//! delays it).
 
 // Index loops mirror the matrix maths (rows i, actuators j) and read best that way.
 #![allow(clippy::needless_range_loop)]
@@ -120,8 +122,8 @@ pub struct RateModel<const N: usize, const M: usize> {
 }
 
 impl<const N: usize, const M: usize> RateModel<N, M> {
-    pub fn new(params: &RateParams, dt: f64) -> Result<Self, RateModelError> {
-        let l = params.actuators();
+    /// The sizes and the period every model must satisfy.
+    fn check(l: usize, vertical: usize, dt: f64) -> Result<(), RateModelError> {
         if l == 0 || l > MAX_ACTUATORS {
             return Err(RateModelError::Actuators { l });
         }
@@ -131,15 +133,18 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
         if M != 3 && M != 4 {
             return Err(RateModelError::MeasurementSize { m: M });
         }
-        if M == 4 && params.vertical.len() != l {
-            return Err(RateModelError::Vertical {
-                got: params.vertical.len(),
-                l,
-            });
+        if M == 4 && vertical != l {
+            return Err(RateModelError::Vertical { got: vertical, l });
         }
         if !(dt.is_finite() && dt > 0.0) {
             return Err(RateModelError::Parameter { what: "dt" });
         }
+        Ok(())
+    }
+
+    pub fn new(params: &RateParams, dt: f64) -> Result<Self, RateModelError> {
+        let l = params.actuators();
+        Self::check(l, params.vertical.len(), dt)?;
         if params.damping.iter().any(|d| !d.is_finite() || *d < 0.0) {
             return Err(RateModelError::Parameter { what: "damping" });
         }
@@ -192,24 +197,7 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
     /// The model of identified discrete parameters, at the period they were identified at.
     pub fn from_arx(params: &ArxParams, dt: f64) -> Result<Self, RateModelError> {
         let l = params.input.len();
-        if l == 0 || l > MAX_ACTUATORS {
-            return Err(RateModelError::Actuators { l });
-        }
-        if N != 3 + 2 * l {
-            return Err(RateModelError::StateSize { n: N, l });
-        }
-        if M != 3 && M != 4 {
-            return Err(RateModelError::MeasurementSize { m: M });
-        }
-        if M == 4 && params.vertical.len() != l {
-            return Err(RateModelError::Vertical {
-                got: params.vertical.len(),
-                l,
-            });
-        }
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(RateModelError::Parameter { what: "dt" });
-        }
+        Self::check(l, params.vertical.len(), dt)?;
         // The parameters are per step: another period would need another identification.
         if params.dt.is_nan() || (params.dt - dt).abs() > 0.05 * dt {
             return Err(RateModelError::Period {
@@ -253,17 +241,6 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
             exogenous: true,
             offset,
         })
-    }
-
-    /// Whether `u` carries the previous measured rate increment after the commands.
-    pub fn takes_previous_increment(&self) -> bool {
-        self.exogenous
-    }
-
-    /// The discrete effect of one unit of command `j` on the measurements over one step:
-    /// `[roll, pitch, yaw(, a_z)]` (rad/s per step; m/s²).
-    pub fn effect(&self, j: usize) -> [f64; 4] {
-        [self.g[0][j], self.g[1][j], self.g[2][j], self.g[3][j]]
     }
 
     pub fn actuators(&self) -> usize {

@@ -118,6 +118,10 @@ pub struct ModelSpec {
     pub arx: Option<crate::model::ArxParams>,
 }
 
+/// Longest command delay an identified model may have (samples; the pipeline keeps this many
+/// past commands).
+pub const MAX_ARX_DELAY: usize = 7;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Dynamics {
@@ -313,6 +317,21 @@ impl Profile {
         if !(self.diagnosis.threshold.is_finite() && self.diagnosis.threshold > 0.0) {
             return Err("diagnosis.threshold must be positive".into());
         }
+        if let Some(a) = &m.arx {
+            if a.input.len() != l || (!a.vertical.is_empty() && a.vertical.len() != l) {
+                return Err(format!(
+                    "model.arx: {} input columns and {} vertical entries for {l} actuators",
+                    a.input.len(),
+                    a.vertical.len()
+                ));
+            }
+            if !(a.dt.is_finite() && a.dt > 0.0) || a.delay > MAX_ARX_DELAY {
+                return Err(format!(
+                    "model.arx: dt must be positive and delay at most {MAX_ARX_DELAY} samples (got dt {}, delay {})",
+                    a.dt, a.delay
+                ));
+            }
+        }
         let n = &self.noise;
         for (k, v) in [
             ("gyro", n.gyro),
@@ -445,6 +464,8 @@ impl Profile {
     /// Replace `D`, `G` (as explicit columns) and `c` by identified values.
     pub fn with_rate_params(&self, p: &RateParams) -> Self {
         let mut out = self.clone();
+        // An identified discrete model would take precedence over the parameters given here.
+        out.model.arx = None;
         out.model.damping = p.damping;
         out.model.offset = p.offset;
         out.model.vertical_offset = p.vertical_offset;
