@@ -228,7 +228,8 @@ struct ActuatorState {
     active_filters: u8,
     excitation_reported: bool,
     low_for: f64,
-    delta_hist: Vec<(f64, f64)>,
+    /// The MIT-UKF's delta over the last 3 s (ring: no shifting or allocation once full).
+    delta_hist: std::collections::VecDeque<(f64, f64)>,
     /// A class different from the one in force, and since when it has been seen: a change
     /// of class is reported only once it has held for `CLASS_HOLD_S`.
     class_candidate: Option<(FaultClass, f64)>,
@@ -498,11 +499,10 @@ impl Diagnoser {
                     }
                 }
             }
-            st.delta_hist.push((t, est[0][j].delta));
+            st.delta_hist.push_back((t, est[0][j].delta));
             let keep = (3.0 / self.dt) as usize;
-            if st.delta_hist.len() > keep {
-                let cut = st.delta_hist.len() - keep;
-                st.delta_hist.drain(..cut);
+            while st.delta_hist.len() > keep {
+                st.delta_hist.pop_front();
             }
         }
         if !warm {
@@ -642,7 +642,7 @@ impl Diagnoser {
             let slope = std_ / stt;
             let resid = (sdd - slope * std_).max(0.0) / (n - 2.0);
             let se = (resid / stt).sqrt();
-            let span = slope.abs() * (st.delta_hist.last().unwrap().0 - st.delta_hist[0].0);
+            let span = slope.abs() * (st.delta_hist.back().map_or(0.0, |b| b.0) - st.delta_hist[0].0);
             if se > 0.0 && slope.abs() / se > 30.0 && span > p.bias_tau {
                 return FaultClass::Drift;
             }
