@@ -642,7 +642,8 @@ impl Diagnoser {
             let slope = std_ / stt;
             let resid = (sdd - slope * std_).max(0.0) / (n - 2.0);
             let se = (resid / stt).sqrt();
-            let span = slope.abs() * (st.delta_hist.back().map_or(0.0, |b| b.0) - st.delta_hist[0].0);
+            let span =
+                slope.abs() * (st.delta_hist.back().map_or(0.0, |b| b.0) - st.delta_hist[0].0);
             if se > 0.0 && slope.abs() / se > 30.0 && span > p.bias_tau {
                 return FaultClass::Drift;
             }
