@@ -15,22 +15,8 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-/// `println!` that ends the program quietly when stdout is closed (`ahcmon eval | head`)
+/// `print!` that ends the program quietly when stdout is closed (`ahcmon eval | head`)
 /// instead of panicking; other write errors are reported on stderr once and output stops.
-macro_rules! outln {
-    ($($arg:tt)*) => {{
-        use std::io::Write as _;
-        if let Err(e) = writeln!(std::io::stdout(), $($arg)*) {
-            if e.kind() == std::io::ErrorKind::BrokenPipe {
-                std::process::exit(0);
-            }
-            eprintln!("ahcmon: cannot write to stdout: {e}");
-            std::process::exit(1);
-        }
-    }};
-}
-
-/// `print!` with the same handling as `outln!`.
 macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
@@ -42,6 +28,13 @@ macro_rules! out {
             std::process::exit(1);
         }
     }};
+}
+
+/// `println!` with the same handling as `out!`.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        out!("{}\n", format_args!($($arg)*))
+    };
 }
 
 #[derive(Parser)]

@@ -462,8 +462,11 @@ impl Diagnoser {
             let sigma_u = st.u.var.max(0.0).sqrt();
             for f in 0..2 {
                 let e = est[f][j];
-                raw[0][f][j] = (e.gamma - 1.0) * st.u.mean + e.delta;
-                raw[1][f][j] = (e.gamma - 1.0) * sigma_u;
+                // A non-finite estimate (a filter failing; the pipeline resets it and says so)
+                // must not turn every actuator's attribution into NaN: it counts as no deviation.
+                let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
+                raw[0][f][j] = finite((e.gamma - 1.0) * st.u.mean + e.delta);
+                raw[1][f][j] = finite((e.gamma - 1.0) * sigma_u);
             }
         }
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 2];
@@ -766,10 +769,38 @@ mod tests {
     fn opposite_motors_together_are_not_one_motors_fault() {
         // Hexa X: motors 5 and 6 sit on opposite arms with opposite spin, so both short by the
         // same amount is a thrust-only pattern (model error), which any opposite pair fits.
+        // Without the rule that a second actuator needs an effect of its own, a pair would be
+        // fitted at the full -0.6 each; with it, one motor gets only its single share.
         let d = diagnoser("hexa-x");
         let mut out = [0.0; 6];
-        d.explain(&[0.0, 0.0, 0.0, 0.0, -0.3, -0.3], &mut out);
-        assert!(out.iter().all(|x| x.abs() < 0.06), "{out:?}");
+        d.explain(&[0.0, 0.0, 0.0, 0.0, -0.6, -0.6], &mut out);
+        assert!(out.iter().all(|x| x.abs() < 0.15), "{out:?}");
+    }
+
+    #[test]
+    fn a_nan_estimate_spoils_no_attribution() {
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let healthy = AhcEstimate {
+            gamma: 1.0,
+            gamma_lo: 0.9,
+            gamma_hi: 1.1,
+            delta_lo: -0.1,
+            delta_hi: 0.1,
+            ..Default::default()
+        };
+        let mut ukf = [healthy; 4];
+        ukf[2].gamma = f64::NAN;
+        let mut esmf = [healthy; 4];
+        esmf[1].gamma = 0.6;
+        let mut out = vec![];
+        d.update(0.0, &[0.5; 4], &[&ukf, &esmf], &mut out);
+        for f in 0..2 {
+            for j in 0..4 {
+                assert!(d.deviation(f, j).is_finite(), "filter {f} actuator {j}");
+            }
+        }
+        assert!((d.deviation(1, 1) + 0.2).abs() < 1e-9);
     }
 
     #[test]
