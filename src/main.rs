@@ -964,33 +964,61 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
         return Ok(());
     }
     outln!(
-        "{:<24} {:<12} {:>6} {:>14} {:>14} {:>12} {:>12} {:>11} {:>9}",
+        "{:<24} {:<12} {:>7} {:<9} {:>14} {:>14} {:>10} {:>10} {:>11} {:>9}",
         "scenario",
         "vehicle",
         "flights",
+        "statistic",
         "alarm-free ukf",
         "alarm-free set",
-        "max|e| ukf",
-        "max|e| set",
+        "max ukf",
+        "max set",
         "recommended",
         "profile"
     );
     for c in &out {
-        let profile = ahcmon::telemetry::Profile::resolve(&c.vehicle)
-            .map(|p| format!("{:.3}", p.diagnosis.threshold))
-            .unwrap_or_else(|_| "-".into());
-        outln!(
-            "{:<24} {:<12} {:>6} {:>14.4} {:>14.4} {:>12.4} {:>12.4} {:>11.3} {:>9}",
-            c.scenario,
-            c.vehicle,
-            c.seeds.len(),
-            c.alarm_free[0],
-            c.alarm_free[1],
-            c.max_abs_deviation[0],
-            c.max_abs_deviation[1],
-            c.recommended,
-            profile
-        );
+        let profile = ahcmon::telemetry::Profile::resolve(&c.vehicle).ok();
+        let rows = [
+            (
+                "deviation",
+                c.alarm_free,
+                c.max_abs_deviation,
+                c.recommended,
+                profile.as_ref().map(|p| p.diagnosis.threshold),
+            ),
+            (
+                "gain",
+                c.gain_alarm_free,
+                c.max_abs_gain_gap,
+                c.gain_recommended,
+                profile.as_ref().map(|p| p.diagnosis.gain_threshold),
+            ),
+        ];
+        for (stat, free, max, rec, current) in rows {
+            // A statistic that stayed 0 (no angle outputs, for the gain) has nothing to
+            // calibrate: the bisection's floor would read as a real threshold.
+            let quiet = max[0] == 0.0 && max[1] == 0.0;
+            let num = |v: f64, prec: usize| {
+                if quiet {
+                    "-".to_string()
+                } else {
+                    format!("{v:.prec$}")
+                }
+            };
+            outln!(
+                "{:<24} {:<12} {:>7} {:<9} {:>14} {:>14} {:>10.4} {:>10.4} {:>11} {:>9}",
+                c.scenario,
+                c.vehicle,
+                c.seeds.len(),
+                stat,
+                num(free[0], 4),
+                num(free[1], 4),
+                max[0],
+                max[1],
+                num(rec, 3),
+                current.map_or("-".into(), |t| format!("{t:.3}"))
+            );
+        }
     }
     Ok(())
 }

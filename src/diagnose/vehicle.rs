@@ -39,6 +39,11 @@ pub struct DiagnosisParams {
     pub window_s: f64,
     /// Effective output deviation (units of normalised command) that counts as a fault.
     pub threshold: f64,
+    /// The gain statistic's threshold (same units; see `update`).
+    pub gain_threshold: f64,
+    /// Reference deflection of an angle output (fraction of its half-range) at which a gain
+    /// known to be off is judged: what the fault would cost the operator in a manoeuvre.
+    pub gain_ref: f64,
     /// CUSUM alarm level (s of the statistic at twice the threshold ≈ this × 1).
     pub cusum_h_s: f64,
     /// Below half the threshold for this long clears a fault (s).
@@ -67,6 +72,8 @@ impl Default for DiagnosisParams {
             window_s: 2.0,
             // Calibrated on the healthy flights with gusts and 10 % mismatch (see README).
             threshold: 0.08,
+            gain_threshold: 0.08,
+            gain_ref: 0.25,
             cusum_h_s: 0.25,
             clear_s: 2.0,
             excitation_min_std: 0.01,
@@ -215,6 +222,8 @@ struct Channel {
     e: f64,
     /// The attributed deviation in the command's excursions (see `update`).
     excursion: f64,
+    /// The attributed gain statistic (see `update`).
+    gain_gap: f64,
 }
 
 /// The actuator-level state across filters.
@@ -281,6 +290,7 @@ impl Diagnoser {
         }
         let params = DiagnosisParams {
             threshold: profile.diagnosis.threshold,
+            gain_threshold: profile.diagnosis.gain_threshold,
             ..params
         };
         Self {
@@ -434,6 +444,11 @@ impl Diagnoser {
         self.actuators[j].channels[filter].excursion
     }
 
+    /// The attributed gain statistic of an angle output (0 for motors), see `update`.
+    pub fn gain_gap(&self, filter: usize, j: usize) -> f64 {
+        self.actuators[j].channels[filter].gain_gap
+    }
+
     pub fn active(&self, j: usize) -> Option<FaultClass> {
         self.actuators[j].active
     }
@@ -454,12 +469,19 @@ impl Diagnoser {
         let l = self.actuators.len();
         // Per actuator and filter two deviations of the effective output over the window: at
         // the operating point, `(gamma - 1) ū + delta`, and in the command's excursions about
-        // it, `(gamma - 1) σ_u` (a surface's gain fault near trim shows only there).
-        let mut raw = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 2];
+        // it, `(gamma - 1) σ_u` (a surface's gain fault near trim shows only there). And for
+        // angle outputs a gain statistic: how far the healthy gain lies outside the filter's
+        // gamma bounds, at the reference deflection. A surface that barely moves in cruise
+        // shows a halved gain hardly at all in the first two, yet the filter may know the gain
+        // well; a gain the filter cannot pin down (wide bounds) gives 0. Its own threshold is
+        // calibrated like the other (`ahcmon thresholds`). Motors have their gain in the first
+        // (ū ≈ 0.5) and are left out, so their isolation rules stay as they are.
+        let mut raw = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
         for j in 0..l {
             let st = &mut self.actuators[j];
             st.u.push(u[j], a);
             let sigma_u = st.u.var.max(0.0).sqrt();
+            let gain_seen = !self.is_motor[j] && sigma_u >= p.excitation_min_std;
             for f in 0..2 {
                 let e = est[f][j];
                 // A non-finite estimate (a filter failing; the pipeline resets it and says so)
@@ -467,9 +489,21 @@ impl Diagnoser {
                 let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
                 raw[0][f][j] = finite((e.gamma - 1.0) * st.u.mean + e.delta);
                 raw[1][f][j] = finite((e.gamma - 1.0) * sigma_u);
+                let gap = if e.gamma_hi < 1.0 {
+                    e.gamma_hi - 1.0
+                } else if e.gamma_lo > 1.0 {
+                    e.gamma_lo - 1.0
+                } else {
+                    0.0
+                };
+                raw[2][f][j] = if gain_seen {
+                    finite(gap * p.gain_ref)
+                } else {
+                    0.0
+                };
             }
         }
-        let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 2];
+        let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
         for (xs, rs) in explained.iter_mut().zip(&raw) {
             for (x, r) in xs.iter_mut().zip(rs) {
                 let e = self.without_thrust_mismatch(r);
@@ -484,7 +518,9 @@ impl Diagnoser {
                 ch.last = e;
                 ch.e = explained[0][f][j];
                 ch.excursion = explained[1][f][j];
-                let ratio = explained[0][f][j].hypot(explained[1][f][j]) / p.threshold;
+                ch.gain_gap = explained[2][f][j];
+                let ratio = (explained[0][f][j].hypot(explained[1][f][j]) / p.threshold)
+                    .max(explained[2][f][j].abs() / p.gain_threshold);
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
                 if !warm {
                     ch.cusum = 0.0;
@@ -801,6 +837,52 @@ mod tests {
             }
         }
         assert!((d.deviation(1, 1) + 0.2).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_known_gain_loss_near_trim_is_decided_by_the_gain_statistic() {
+        // Plane elevator near trim (u ≈ 0.04 ± 0.05): gamma 0.5 known to ±0.03 moves the
+        // effective output by about 0.03, under the deviation threshold, but the healthy gain
+        // lies 0.47 outside the bounds. Gain bounds containing 1 give no statistic at all.
+        let p = Profile::resolve("plane").unwrap();
+        let healthy = AhcEstimate {
+            gamma: 1.0,
+            gamma_lo: 0.9,
+            gamma_hi: 1.1,
+            delta_lo: -0.02,
+            delta_hi: 0.02,
+            ..Default::default()
+        };
+        let mut est = [healthy; 3];
+        est[1].gamma = 0.5;
+        est[1].gamma_lo = 0.47;
+        est[1].gamma_hi = 0.53;
+        let run = |est: &[AhcEstimate; 3]| {
+            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+            let mut out = vec![];
+            let mut decided = vec![];
+            for k in 0..500 {
+                let t = k as f64 * 0.02;
+                let elevator = 0.04 + 0.05 * (t * 4.0).sin();
+                d.update(t, &[0.0, elevator, 0.0], &[est, est], &mut out);
+                decided.extend(out.drain(..).filter(|x| x.event == Event::Fault));
+            }
+            (
+                d.gain_gap(0, 1),
+                d.deviation(0, 1).hypot(d.excursion(0, 1)),
+                decided,
+            )
+        };
+        let (gap, dev, decided) = run(&est);
+        assert!((gap + 0.47 * 0.25).abs() < 1e-6, "gain statistic {gap}");
+        assert!(dev < p.diagnosis.threshold, "deviation {dev}");
+        assert_eq!(decided.len(), 1, "{decided:?}");
+        assert_eq!(decided[0].actuator.as_deref(), Some("elevator"));
+        let mut unsure = est;
+        unsure[1].gamma_hi = 1.02;
+        let (gap, _, decided) = run(&unsure);
+        assert_eq!(gap, 0.0);
+        assert!(decided.is_empty(), "{decided:?}");
     }
 
     #[test]

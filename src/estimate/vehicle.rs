@@ -37,6 +37,10 @@ pub struct AhcEstimate {
     /// The same for the command's excursions about the operating point, `(gamma - 1) σ_u`:
     /// the detection statistic is `hypot(deviation, excursion)`.
     pub excursion: f64,
+    /// How far the healthy gain lies outside the filter's gamma bounds, at the reference
+    /// deflection (`DiagnosisParams::gain_ref`), attributed like `deviation`: the gain
+    /// statistic of angle outputs (see `diagnose::vehicle`).
+    pub gain_gap: f64,
 }
 
 impl AhcEstimate {
@@ -309,6 +313,7 @@ fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
         q_delta: q[di],
         deviation: 0.0,
         excursion: 0.0,
+        gain_gap: 0.0,
     }
 }
 

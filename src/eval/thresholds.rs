@@ -6,7 +6,8 @@
 //! attributed deviation of every actuator and filter is kept after the warm-up. For each such
 //! trace the smallest threshold at which the diagnosis' CUSUM would never alarm is found by
 //! bisection (the CUSUM only falls as the threshold rises); the largest over traces, times a
-//! margin, is the vehicle's threshold.
+//! margin, is the vehicle's threshold. The gain statistic of angle outputs (its own CUSUM term,
+//! see `diagnose::vehicle`) is calibrated the same way into the gain threshold.
 
 use super::EvalError;
 use super::vehicle::{StepSink, run_vehicle_scenario};
@@ -35,6 +36,10 @@ pub struct ThresholdCalibration {
     pub max_abs_deviation: [f64; 2],
     /// `MARGIN` × the larger of `alarm_free`.
     pub recommended: f64,
+    /// The same three for the gain statistic.
+    pub gain_alarm_free: [f64; 2],
+    pub max_abs_gain_gap: [f64; 2],
+    pub gain_recommended: f64,
 }
 
 /// The smallest threshold at which `S ← max(0, S + (|e|/threshold − 1) dt)` stays at or below
@@ -68,10 +73,11 @@ pub fn alarm_free_threshold(trace: &[f32], dt: f64, h: f64) -> f64 {
     hi
 }
 
-/// Keeps every step's deviations after the warm-up: `traces[filter][actuator]`.
+/// Keeps every step's statistics after the warm-up: `traces[statistic][filter][actuator]`
+/// (statistic 0: `hypot(deviation, excursion)`, 1: the gain statistic).
 struct Collect {
     warmup_s: f64,
-    traces: [Vec<Vec<f32>>; 2],
+    traces: [[Vec<Vec<f32>>; 2]; 2],
 }
 
 impl StepSink for Collect {
@@ -80,11 +86,18 @@ impl StepSink for Collect {
             return;
         }
         for (f, row) in est.iter().enumerate() {
-            if self.traces[f].len() < row.len() {
-                self.traces[f].resize(row.len(), Vec::new());
-            }
-            for (j, e) in row.iter().enumerate() {
-                self.traces[f][j].push(e.deviation.hypot(e.excursion) as f32);
+            for (k, traces) in self.traces.iter_mut().enumerate() {
+                if traces[f].len() < row.len() {
+                    traces[f].resize(row.len(), Vec::new());
+                }
+                for (j, e) in row.iter().enumerate() {
+                    let stat = if k == 0 {
+                        e.deviation.hypot(e.excursion)
+                    } else {
+                        e.gain_gap
+                    };
+                    traces[f][j].push(stat as f32);
+                }
             }
         }
     }
@@ -107,41 +120,52 @@ pub fn calibrate_threshold(
         ));
     }
     let dt = named.scenario.dt();
-    let per_seed: Vec<Result<[(f64, f64); 2], EvalError>> = seeds
+    // Per seed, statistic and filter: (alarm-free threshold, largest value).
+    type PerSeed = [[(f64, f64); 2]; 2];
+    let per_seed: Vec<Result<PerSeed, EvalError>> = seeds
         .par_iter()
         .map(|&seed| {
             let mut sink = Collect {
                 warmup_s: params.warmup_s,
-                traces: [vec![], vec![]],
+                traces: Default::default(),
             };
             run_vehicle_scenario(named, seed, false, &mut sink)?;
-            let mut out = [(0.0f64, 0.0f64); 2];
-            for (f, slot) in out.iter_mut().enumerate() {
-                for tr in &sink.traces[f] {
-                    slot.0 = slot.0.max(alarm_free_threshold(tr, dt, params.cusum_h_s));
-                    let m = tr.iter().fold(0.0f64, |a, &e| a.max(f64::from(e).abs()));
-                    slot.1 = slot.1.max(m);
+            let mut out = [[(0.0f64, 0.0f64); 2]; 2];
+            for (k, per_filter) in out.iter_mut().enumerate() {
+                for (f, slot) in per_filter.iter_mut().enumerate() {
+                    for tr in &sink.traces[k][f] {
+                        slot.0 = slot.0.max(alarm_free_threshold(tr, dt, params.cusum_h_s));
+                        let m = tr.iter().fold(0.0f64, |a, &e| a.max(f64::from(e).abs()));
+                        slot.1 = slot.1.max(m);
+                    }
                 }
             }
             Ok(out)
         })
         .collect();
-    let mut alarm_free = [0.0f64; 2];
-    let mut max_abs_deviation = [0.0f64; 2];
+    let mut alarm_free = [[0.0f64; 2]; 2];
+    let mut max_abs = [[0.0f64; 2]; 2];
     for r in per_seed {
         let r = r?;
-        for f in 0..2 {
-            alarm_free[f] = alarm_free[f].max(r[f].0);
-            max_abs_deviation[f] = max_abs_deviation[f].max(r[f].1);
+        for k in 0..2 {
+            for f in 0..2 {
+                alarm_free[k][f] = alarm_free[k][f].max(r[k][f].0);
+                max_abs[k][f] = max_abs[k][f].max(r[k][f].1);
+            }
         }
     }
+    // A statistic that never rose above the bisection's floor has nothing to calibrate; the
+    // floor then stands for "any small threshold", and the recommendation says so.
     Ok(ThresholdCalibration {
         scenario: named.name.clone(),
         vehicle: named.scenario.vehicle.clone(),
         seeds: seeds.to_vec(),
-        alarm_free,
-        max_abs_deviation,
-        recommended: MARGIN * alarm_free[0].max(alarm_free[1]),
+        alarm_free: alarm_free[0],
+        max_abs_deviation: max_abs[0],
+        recommended: MARGIN * alarm_free[0][0].max(alarm_free[0][1]),
+        gain_alarm_free: alarm_free[1],
+        max_abs_gain_gap: max_abs[1],
+        gain_recommended: MARGIN * alarm_free[1][0].max(alarm_free[1][1]),
     })
 }
 

@@ -74,6 +74,7 @@ pub fn run_vehicle_scenario(
     let (cfg, mut profile) = sim_config(named, seed)?;
     if let Some(th) = sink.threshold() {
         profile.diagnosis.threshold = th;
+        profile.diagnosis.gain_threshold = th;
     }
     let dt = cfg.dt;
     let mut sim = VehicleSim::new(cfg).map_err(err)?;
@@ -130,6 +131,7 @@ pub fn run_vehicle_scenario(
             for (j, e) in row[..l].iter_mut().enumerate() {
                 e.deviation = diag.deviation(f, j);
                 e.excursion = diag.excursion(f, j);
+                e.gain_gap = diag.gain_gap(f, j);
             }
         }
         let views = [&est[0][..l], &est[1][..l]];

@@ -155,11 +155,17 @@ fn az_noise() -> f64 {
 pub struct DiagnosisSpec {
     /// Effective output deviation (units of normalised command) that counts as a fault.
     pub threshold: f64,
+    /// The same for the gain statistic of angle outputs: the healthy gain's distance outside
+    /// the gamma bounds, times the reference deflection (see `diagnose::vehicle`).
+    pub gain_threshold: f64,
 }
 
 impl Default for DiagnosisSpec {
     fn default() -> Self {
-        Self { threshold: 0.08 }
+        Self {
+            threshold: 0.08,
+            gain_threshold: 0.08,
+        }
     }
 }
 
@@ -316,6 +322,9 @@ impl Profile {
         }
         if !(self.diagnosis.threshold.is_finite() && self.diagnosis.threshold > 0.0) {
             return Err("diagnosis.threshold must be positive".into());
+        }
+        if !(self.diagnosis.gain_threshold.is_finite() && self.diagnosis.gain_threshold > 0.0) {
+            return Err("diagnosis.gain_threshold must be positive".into());
         }
         if let Some(a) = &m.arx {
             if a.input.len() != l || (!a.vertical.is_empty() && a.vertical.len() != l) {
