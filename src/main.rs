@@ -991,18 +991,17 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
                 c.gain_alarm_free,
                 c.max_abs_gain_gap,
                 c.gain_recommended,
-                profile.as_ref().map(|p| p.diagnosis.gain_threshold),
+                profile.as_ref().and_then(|p| p.diagnosis.gain_threshold),
             ),
         ];
         for (stat, free, max, rec, current) in rows {
-            // A statistic that stayed 0 (no angle outputs, for the gain) has nothing to
-            // calibrate: the bisection's floor would read as a real threshold.
-            let quiet = max[0] == 0.0 && max[1] == 0.0;
-            let num = |v: f64, prec: usize| {
-                if quiet {
+            // A statistic that stayed 0 (for one filter, or both: no angle outputs, for the
+            // gain) has nothing to calibrate: the bisection's floor would read as a threshold.
+            let num = |v: f64, max: f64| {
+                if max == 0.0 {
                     "-".to_string()
                 } else {
-                    format!("{v:.prec$}")
+                    format!("{v:.4}")
                 }
             };
             outln!(
@@ -1011,11 +1010,11 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
                 c.vehicle,
                 c.seeds.len(),
                 stat,
-                num(free[0], 4),
-                num(free[1], 4),
+                num(free[0], max[0]),
+                num(free[1], max[1]),
                 max[0],
                 max[1],
-                num(rec, 3),
+                rec.map_or("-".into(), |r| format!("{r:.3}")),
                 current.map_or("-".into(), |t| format!("{t:.3}"))
             );
         }

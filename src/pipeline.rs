@@ -417,6 +417,7 @@ impl VehiclePipeline {
                     for j in 0..r.l {
                         r.est[f][j].deviation = r.diag.deviation(f, j);
                         r.est[f][j].excursion = r.diag.excursion(f, j);
+                        r.est[f][j].gain_gap = r.diag.gain_gap(f, j);
                     }
                 }
                 let views = [&r.est[0][..r.l], &r.est[1][..r.l]];

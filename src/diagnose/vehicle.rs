@@ -19,12 +19,16 @@
 //! then never look like one actuator's fault, however far the individual estimates wander
 //! along them; a lone fault is attributed whole to its actuator.
 //!
-//! Detection: a CUSUM on `hypot(deviation, excursion) / threshold - 1` (units of seconds over
-//! threshold) per filter, alarm when it passes `cusum_h_s`; clearing when the statistic has
-//! stayed below half the threshold for `clear_s` (hysteresis). Every alarmed actuator is a
-//! fault decision; `also` names the others alarmed at the time. The threshold is calibrated on
-//! healthy Monte-Carlo flights with gusts and model mismatch (`ahcmon thresholds`), never on
-//! the fault scenarios.
+//! Angle outputs also have a gain statistic: how far the healthy gain lies outside the filter's
+//! gamma bounds, at a reference deflection (see `update`), attributed the same way.
+//!
+//! Detection: a CUSUM on `max(hypot(deviation, excursion) / threshold, |gain| /
+//! gain_threshold) - 1` (units of seconds over threshold) per filter, alarm when it passes
+//! `cusum_h_s`; clearing when both have stayed below half their thresholds for `clear_s`
+//! (hysteresis). Every alarmed actuator is a fault decision; `also` names the others alarmed at
+//! the time. Both thresholds are calibrated on healthy Monte-Carlo flights with gusts and model
+//! mismatch (`ahcmon thresholds`), never on the fault scenarios; a profile without a
+//! `gain_threshold` has no gain term.
 
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::telemetry::{Profile, Role};
@@ -39,7 +43,7 @@ pub struct DiagnosisParams {
     pub window_s: f64,
     /// Effective output deviation (units of normalised command) that counts as a fault.
     pub threshold: f64,
-    /// The gain statistic's threshold (same units; see `update`).
+    /// The gain statistic's threshold (same units; see `update`); infinite: it decides nothing.
     pub gain_threshold: f64,
     /// Reference deflection of an angle output (fraction of its half-range) at which a gain
     /// known to be off is judged: what the fault would cost the operator in a manoeuvre.
@@ -72,7 +76,7 @@ impl Default for DiagnosisParams {
             window_s: 2.0,
             // Calibrated on the healthy flights with gusts and 10 % mismatch (see README).
             threshold: 0.08,
-            gain_threshold: 0.08,
+            gain_threshold: f64::INFINITY,
             gain_ref: 0.25,
             cusum_h_s: 0.25,
             clear_s: 2.0,
@@ -270,6 +274,8 @@ pub struct Diagnoser {
     /// The motors, when there are three or more: their median deviation is thrust mismatch.
     motors: Vec<usize>,
     is_motor: Vec<bool>,
+    /// Angle outputs (not motors or throttle): the ones with a gain statistic.
+    is_angle: Vec<bool>,
 }
 
 impl Diagnoser {
@@ -282,6 +288,11 @@ impl Diagnoser {
             .iter()
             .map(|a| a.role == Role::Motor)
             .collect();
+        let is_angle = profile
+            .actuators
+            .iter()
+            .map(|a| !a.role.is_range())
+            .collect();
         let mut motors: Vec<usize> = (0..effects.len())
             .filter(|&j| profile.actuators[j].role == Role::Motor)
             .collect();
@@ -290,7 +301,7 @@ impl Diagnoser {
         }
         let params = DiagnosisParams {
             threshold: profile.diagnosis.threshold,
-            gain_threshold: profile.diagnosis.gain_threshold,
+            gain_threshold: profile.diagnosis.gain_threshold.unwrap_or(f64::INFINITY),
             ..params
         };
         Self {
@@ -304,6 +315,7 @@ impl Diagnoser {
             effects,
             motors,
             is_motor,
+            is_angle,
         }
     }
 
@@ -474,14 +486,16 @@ impl Diagnoser {
         // gamma bounds, at the reference deflection. A surface that barely moves in cruise
         // shows a halved gain hardly at all in the first two, yet the filter may know the gain
         // well; a gain the filter cannot pin down (wide bounds) gives 0. Its own threshold is
-        // calibrated like the other (`ahcmon thresholds`). Motors have their gain in the first
-        // (ū ≈ 0.5) and are left out, so their isolation rules stay as they are.
+        // calibrated like the other (`ahcmon thresholds`). Range outputs (motors, throttle) have
+        // their gain in the first (ū ≈ 0.5) and are left out, so their isolation rules stay as
+        // they are.
         let mut raw = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
+        let mut gain_seen = [false; crate::model::MAX_ACTUATORS];
         for j in 0..l {
             let st = &mut self.actuators[j];
             st.u.push(u[j], a);
             let sigma_u = st.u.var.max(0.0).sqrt();
-            let gain_seen = !self.is_motor[j] && sigma_u >= p.excitation_min_std;
+            gain_seen[j] = self.is_angle[j] && sigma_u >= p.excitation_min_std;
             for f in 0..2 {
                 let e = est[f][j];
                 // A non-finite estimate (a filter failing; the pipeline resets it and says so)
@@ -496,7 +510,7 @@ impl Diagnoser {
                 } else {
                     0.0
                 };
-                raw[2][f][j] = if gain_seen {
+                raw[2][f][j] = if gain_seen[j] {
                     finite(gap * p.gain_ref)
                 } else {
                     0.0
@@ -504,10 +518,24 @@ impl Diagnoser {
             }
         }
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
-        for (xs, rs) in explained.iter_mut().zip(&raw) {
+        for (k, (xs, rs)) in explained.iter_mut().zip(&raw).enumerate() {
             for (x, r) in xs.iter_mut().zip(rs) {
-                let e = self.without_thrust_mismatch(r);
+                // Motors have no gain statistic, so no thrust mismatch to take out of it.
+                let e = if k < 2 {
+                    self.without_thrust_mismatch(r)
+                } else {
+                    *r
+                };
                 self.explain(&e[..l], &mut x[..l]);
+            }
+        }
+        // The attribution may hand a share to an actuator without a gain statistic (a motor,
+        // a surface standing still): it has none.
+        for x in explained[2].iter_mut() {
+            for (xj, seen) in x[..l].iter_mut().zip(&gain_seen) {
+                if !seen {
+                    *xj = 0.0;
+                }
             }
         }
         for j in 0..l {
@@ -857,32 +885,56 @@ mod tests {
         est[1].gamma = 0.5;
         est[1].gamma_lo = 0.47;
         est[1].gamma_hi = 0.53;
-        let run = |est: &[AhcEstimate; 3]| {
-            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let run = |p: &Profile, est: &[AhcEstimate; 3], moving: f64| {
+            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, p, 0.02);
             let mut out = vec![];
             let mut decided = vec![];
             for k in 0..500 {
                 let t = k as f64 * 0.02;
-                let elevator = 0.04 + 0.05 * (t * 4.0).sin();
+                let elevator = 0.04 + moving * (t * 4.0).sin();
                 d.update(t, &[0.0, elevator, 0.0], &[est, est], &mut out);
                 decided.extend(out.drain(..).filter(|x| x.event == Event::Fault));
             }
-            (
-                d.gain_gap(0, 1),
-                d.deviation(0, 1).hypot(d.excursion(0, 1)),
-                decided,
-            )
+            let dev = d.deviation(0, 1).hypot(d.excursion(0, 1));
+            (d.gain_gap(0, 1), dev, decided)
         };
-        let (gap, dev, decided) = run(&est);
+        let (gap, dev, decided) = run(&p, &est, 0.05);
         assert!((gap + 0.47 * 0.25).abs() < 1e-6, "gain statistic {gap}");
         assert!(dev < p.diagnosis.threshold, "deviation {dev}");
         assert_eq!(decided.len(), 1, "{decided:?}");
         assert_eq!(decided[0].actuator.as_deref(), Some("elevator"));
+        // Bounds that contain the healthy gain, a command standing still, a range output
+        // (throttle), and a profile without a calibrated gain threshold: no statistic or no
+        // decision.
         let mut unsure = est;
         unsure[1].gamma_hi = 1.02;
-        let (gap, _, decided) = run(&unsure);
+        let (gap, _, decided) = run(&p, &unsure, 0.05);
         assert_eq!(gap, 0.0);
         assert!(decided.is_empty(), "{decided:?}");
+        let (gap, _, decided) = run(&p, &est, 0.0);
+        assert_eq!(gap, 0.0);
+        assert!(decided.is_empty(), "{decided:?}");
+        let mut throttle = p.clone();
+        throttle.actuators[1].role = Role::Throttle;
+        let (gap, _, _) = run(&throttle, &est, 0.05);
+        assert_eq!(gap, 0.0);
+        let mut uncalibrated = p.clone();
+        uncalibrated.diagnosis.gain_threshold = None;
+        let (gap, _, decided) = run(&uncalibrated, &est, 0.05);
+        assert!(gap < 0.0 && decided.is_empty(), "{gap} {decided:?}");
+        // The profile's threshold is the one used: a gap of 0.36 (statistic 0.09) stays under
+        // the plane's 0.095 but not under 0.085.
+        let mut smaller = est;
+        smaller[1].gamma_hi = 0.64;
+        let (gap, _, decided) = run(&p, &smaller, 0.05);
+        assert!(
+            (gap + 0.09).abs() < 1e-6 && decided.is_empty(),
+            "{gap} {decided:?}"
+        );
+        let mut lower = p.clone();
+        lower.diagnosis.gain_threshold = Some(0.085);
+        let (_, _, decided) = run(&lower, &smaller, 0.05);
+        assert_eq!(decided.len(), 1, "{decided:?}");
     }
 
     #[test]

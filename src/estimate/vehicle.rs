@@ -35,7 +35,7 @@ pub struct AhcEstimate {
     /// `(gamma - 1) u + delta` it does not wander along what the measurements cannot see.
     pub deviation: f64,
     /// The same for the command's excursions about the operating point, `(gamma - 1) σ_u`:
-    /// the detection statistic is `hypot(deviation, excursion)`.
+    /// the deviation statistic is `hypot(deviation, excursion)`.
     pub excursion: f64,
     /// How far the healthy gain lies outside the filter's gamma bounds, at the reference
     /// deflection (`DiagnosisParams::gain_ref`), attributed like `deviation`: the gain

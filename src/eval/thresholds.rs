@@ -34,12 +34,13 @@ pub struct ThresholdCalibration {
     pub alarm_free: [f64; 2],
     /// Per filter: the largest detection statistic seen after the warm-up.
     pub max_abs_deviation: [f64; 2],
-    /// `MARGIN` × the larger of `alarm_free`.
-    pub recommended: f64,
+    /// `MARGIN` × the larger of `alarm_free`; null when the statistic stayed 0 throughout
+    /// (nothing to calibrate: a vehicle with only motors has no gain statistic).
+    pub recommended: Option<f64>,
     /// The same three for the gain statistic.
     pub gain_alarm_free: [f64; 2],
     pub max_abs_gain_gap: [f64; 2],
-    pub gain_recommended: f64,
+    pub gain_recommended: Option<f64>,
 }
 
 /// The smallest threshold at which `S ← max(0, S + (|e|/threshold − 1) dt)` stays at or below
@@ -154,18 +155,22 @@ pub fn calibrate_threshold(
             }
         }
     }
-    // A statistic that never rose above the bisection's floor has nothing to calibrate; the
-    // floor then stands for "any small threshold", and the recommendation says so.
+    // A statistic that stayed 0 has nothing to calibrate (the bisection's floor would read as a
+    // real threshold): no recommendation.
+    let recommend = |k: usize| {
+        (max_abs[k].iter().any(|&m| m > 0.0))
+            .then(|| MARGIN * alarm_free[k][0].max(alarm_free[k][1]))
+    };
     Ok(ThresholdCalibration {
         scenario: named.name.clone(),
         vehicle: named.scenario.vehicle.clone(),
         seeds: seeds.to_vec(),
         alarm_free: alarm_free[0],
         max_abs_deviation: max_abs[0],
-        recommended: MARGIN * alarm_free[0][0].max(alarm_free[0][1]),
+        recommended: recommend(0),
         gain_alarm_free: alarm_free[1],
         max_abs_gain_gap: max_abs[1],
-        gain_recommended: MARGIN * alarm_free[1][0].max(alarm_free[1][1]),
+        gain_recommended: recommend(1),
     })
 }
 

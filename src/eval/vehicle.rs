@@ -20,8 +20,9 @@ const TRACE_POINTS: usize = 2000;
 pub trait StepSink {
     fn step(&mut self, sample: &VehicleSample, est: &[&[AhcEstimate]; 2], profile: &Profile);
     fn decision(&mut self, d: &Decision);
-    /// A decision threshold to fly with instead of the profile's (the threshold calibration
-    /// flies with none, so that no decision feeds back into the filters it calibrates on).
+    /// A decision threshold to fly with instead of the profile's, for both statistics (the
+    /// threshold calibration flies with an infinite one, so that no decision feeds back into
+    /// the filters it calibrates on).
     fn threshold(&self) -> Option<f64> {
         None
     }
@@ -74,7 +75,7 @@ pub fn run_vehicle_scenario(
     let (cfg, mut profile) = sim_config(named, seed)?;
     if let Some(th) = sink.threshold() {
         profile.diagnosis.threshold = th;
-        profile.diagnosis.gain_threshold = th;
+        profile.diagnosis.gain_threshold = Some(th);
     }
     let dt = cfg.dt;
     let mut sim = VehicleSim::new(cfg).map_err(err)?;

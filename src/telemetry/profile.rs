@@ -156,15 +156,18 @@ pub struct DiagnosisSpec {
     /// Effective output deviation (units of normalised command) that counts as a fault.
     pub threshold: f64,
     /// The same for the gain statistic of angle outputs: the healthy gain's distance outside
-    /// the gamma bounds, times the reference deflection (see `diagnose::vehicle`).
-    pub gain_threshold: f64,
+    /// the gamma bounds, times the reference deflection (see `diagnose::vehicle`). Absent:
+    /// that statistic decides nothing (it has to be calibrated for the vehicle first, with
+    /// `ahcmon thresholds`: healthy values differ by a factor of three between vehicles).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gain_threshold: Option<f64>,
 }
 
 impl Default for DiagnosisSpec {
     fn default() -> Self {
         Self {
             threshold: 0.08,
-            gain_threshold: 0.08,
+            gain_threshold: None,
         }
     }
 }
@@ -323,7 +326,9 @@ impl Profile {
         if !(self.diagnosis.threshold.is_finite() && self.diagnosis.threshold > 0.0) {
             return Err("diagnosis.threshold must be positive".into());
         }
-        if !(self.diagnosis.gain_threshold.is_finite() && self.diagnosis.gain_threshold > 0.0) {
+        if let Some(g) = self.diagnosis.gain_threshold
+            && !(g.is_finite() && g > 0.0)
+        {
             return Err("diagnosis.gain_threshold must be positive".into());
         }
         if let Some(a) = &m.arx {
