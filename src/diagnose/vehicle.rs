@@ -363,6 +363,11 @@ impl Diagnoser {
                 v[i] += bj[i] * ej;
             }
         }
+        if v == [0.0; 4] {
+            // Nothing to explain (e.g. the gain statistic of a vehicle with only motors).
+            out.fill(0.0);
+            return;
+        }
         let dot = |a: &[f64; 4], c: &[f64; 4]| -> f64 { (0..4).map(|i| a[i] * c[i]).sum() };
         let share = |bj: &[f64; 4], r: &[f64; 4]| -> f64 {
             let n = dot(bj, bj);
