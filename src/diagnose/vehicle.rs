@@ -260,6 +260,14 @@ const MIN_OWN_FRACTION: f64 = 0.25;
 /// gain and bias settle, e.g. right after a fault is removed).
 const CLASS_HOLD_S: f64 = 1.0;
 
+/// A motor's excess explaining at least this fraction of what another motor's loss explains
+/// is named as the alternative in the decision. On a hexacopter opposite motors differ only in
+/// a_z, about 6 % of the information per step: a lone loss leaves its opposite motor's excess
+/// at (1-0.06)²/(1+0.06)² ≈ 0.79 of it, so the hexacopter's motor decisions name it (rightly:
+/// the rates cannot tell them apart). On a quad X, yaw adds to a_z (≈ 10 %, 0.68): named only
+/// when the pattern is unclear.
+const ALTERNATIVE_SHARE: f64 = 0.78;
+
 /// Per-vehicle diagnosis over both filters.
 pub struct Diagnoser {
     pub params: DiagnosisParams,
@@ -276,6 +284,9 @@ pub struct Diagnoser {
     is_motor: Vec<bool>,
     /// Angle outputs (not motors or throttle): the ones with a gain statistic.
     is_angle: Vec<bool>,
+    /// Per filter, the last update's `(j, m)` from `explain` (motor `j`'s loss chosen, motor
+    /// `m`'s excess nearly as good), for the decision's detail.
+    prior_decided: [Option<(usize, usize)>; 2],
 }
 
 impl Diagnoser {
@@ -316,6 +327,7 @@ impl Diagnoser {
             motors,
             is_motor,
             is_angle,
+            prior_decided: [None; 2],
         }
     }
 
@@ -353,7 +365,11 @@ impl Diagnoser {
     /// unexplained joins the explanation, all joined ones are refitted together, and this stops
     /// when the next one's share would be under `explain_min`. Joined actuators get
     /// their fitted deviation, the others their share of the remainder.
-    fn explain(&self, e: &[f64], out: &mut [f64]) {
+    ///
+    /// Returns `(j, m)` when the first actuator joined is motor `j` giving less than commanded
+    /// and motor `m` giving more explains nearly as much (`ALTERNATIVE_SHARE`): the
+    /// measurements hardly tell the two apart (opposite motors differ only in a_z).
+    fn explain(&self, e: &[f64], out: &mut [f64]) -> Option<(usize, usize)> {
         const MAX_JOINED: usize = 4;
         let l = e.len();
         let b = &self.effects;
@@ -366,7 +382,7 @@ impl Diagnoser {
         if v == [0.0; 4] {
             // Nothing to explain (e.g. the gain statistic of a vehicle with only motors).
             out.fill(0.0);
-            return;
+            return None;
         }
         let dot = |a: &[f64; 4], c: &[f64; 4]| -> f64 { (0..4).map(|i| a[i] * c[i]).sum() };
         let share = |bj: &[f64; 4], r: &[f64; 4]| -> f64 {
@@ -379,6 +395,7 @@ impl Diagnoser {
         let mut x = [0.0; MAX_JOINED];
         let mut k = 0;
         let mut rest = v;
+        let mut prior_decided = None;
         while k < MAX_JOINED.min(l) {
             // Explained energy, with the motors' prior: a motor that loses thrust is common, one
             // that gives more than commanded is rare. It matters where two explanations fit
@@ -400,6 +417,19 @@ impl Diagnoser {
             // Also the first: what no single actuator explains enough of is model error.
             if sj.abs() < self.params.explain_min {
                 break;
+            }
+            if k == 0 && sj < 0.0 && self.is_motor[j] {
+                let unweighted = |m: usize| {
+                    let s = share(&b[m], &rest);
+                    (s > 0.0 && self.is_motor[m]).then(|| s * s * dot(&b[m], &b[m]))
+                };
+                let ej = sj * sj * dot(&b[j], &b[j]);
+                prior_decided = (0..l)
+                    .filter(|&m| m != j)
+                    .filter_map(|m| unweighted(m).map(|e| (m, e)))
+                    .filter(|&(_, e)| e >= ALTERNATIVE_SHARE * ej)
+                    .max_by(|p, q| p.1.total_cmp(&q.1))
+                    .map(|(m, _)| (j, m));
             }
             // A further actuator joins only with an effect largely its own: two opposite motors
             // (nearly opposite effects) fitted together can produce almost any thrust-only
@@ -448,6 +478,7 @@ impl Diagnoser {
                 None => share(&b[j], &rest),
             };
         }
+        prior_decided.filter(|_| k > 0)
     }
 
     /// The effective output deviation of each actuator and filter of the last update.
@@ -523,17 +554,22 @@ impl Diagnoser {
             }
         }
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
+        let mut prior_decided = [None; 2];
         for (k, (xs, rs)) in explained.iter_mut().zip(&raw).enumerate() {
-            for (x, r) in xs.iter_mut().zip(rs) {
+            for (f, (x, r)) in xs.iter_mut().zip(rs).enumerate() {
                 // Motors have no gain statistic, so no thrust mismatch to take out of it.
                 let e = if k < 2 {
                     self.without_thrust_mismatch(r)
                 } else {
                     *r
                 };
-                self.explain(&e[..l], &mut x[..l]);
+                let decided = self.explain(&e[..l], &mut x[..l]);
+                if k == 0 {
+                    prior_decided[f] = decided;
+                }
             }
         }
+        self.prior_decided = prior_decided;
         // The attribution may hand a share to an actuator without a gain statistic (a motor,
         // a surface standing still): it has none.
         for x in explained[2].iter_mut() {
@@ -639,6 +675,12 @@ impl Diagnoser {
                             self.actuators[j].u.var.sqrt()
                         ));
                     }
+                    if let Some(note) = self.alternative(j) {
+                        d.detail = Some(match d.detail.take() {
+                            Some(prev) => format!("{prev}; {note}"),
+                            None => note,
+                        });
+                    }
                     out.push(d);
                     let st = &mut self.actuators[j];
                     st.active = Some(c);
@@ -680,6 +722,21 @@ impl Diagnoser {
                 }
             }
         }
+    }
+
+    /// When the last attribution put a loss on motor `j` but another motor's excess explained
+    /// nearly as much: the explanation it could not rule out.
+    fn alternative(&self, j: usize) -> Option<String> {
+        let m = self
+            .prior_decided
+            .iter()
+            .flatten()
+            .find(|(jj, _)| *jj == j)
+            .map(|&(_, m)| m)?;
+        Some(format!(
+            "or {} giving more than commanded (stuck high?): the measurements hardly tell the two apart (only a_z can), and a loss is the likelier fault",
+            self.names[m]
+        ))
     }
 
     /// The other actuators alarmed by either filter, by name (a `multiple` isolation).
@@ -844,6 +901,23 @@ mod tests {
         let mut out = [0.0; 6];
         d.explain(&[0.0, 0.0, 0.0, 0.0, -0.6, -0.6], &mut out);
         assert!(out.iter().all(|x| x.abs() < 0.15), "{out:?}");
+    }
+
+    #[test]
+    fn a_motor_excess_that_fits_as_well_is_named_as_the_alternative() {
+        // Hexa X motor 5 giving more (stuck high) looks like opposite motor 6 giving less, but
+        // for a_z: the prior picks motor 6 and says motor 5 fits about as well.
+        let d = diagnoser("hexa-x");
+        let mut out = [0.0; 6];
+        assert_eq!(
+            d.explain(&[0.0, 0.0, 0.0, 0.0, 0.2, 0.0], &mut out),
+            Some((5, 4))
+        );
+        // A quad X motor's loss: the opposite motor's excess also differs in yaw, clearly
+        // worse; no alternative.
+        let d = diagnoser("quad-x");
+        let mut out = [0.0; 4];
+        assert_eq!(d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out), None);
     }
 
     #[test]
