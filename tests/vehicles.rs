@@ -214,3 +214,53 @@ for kind, path in zip(pairs[::2], pairs[1::2]):
     assert!(out.contains("estimates 4000 "), "{out}");
     assert!(out.contains("'fault'"), "{out}");
 }
+
+/// `gamma_off_after_5s_pct` (issue 4: "the MIT-UKF's gamma within 0.05 of truth within 5 s")
+/// recomputed from every step's estimate and the simulator's truth; none for a healthy flight.
+#[test]
+fn gamma_off_after_5s_is_what_the_steps_say() {
+    use ahcmon::diagnose::vehicle::Decision;
+    use ahcmon::estimate::vehicle::AhcEstimate;
+    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
+    use ahcmon::sim::vehicle::VehicleSample;
+    struct Count {
+        j: usize,
+        from: f64,
+        steps: [usize; 2],
+        off: [usize; 2],
+    }
+    impl StepSink for Count {
+        fn step(&mut self, s: &VehicleSample, est: &[&[AhcEstimate]; 2], _: &Profile) {
+            if s.t < self.from {
+                return;
+            }
+            for f in 0..2 {
+                self.steps[f] += 1;
+                self.off[f] += ((est[f][self.j].gamma - s.gamma[self.j]).abs() > 0.05) as usize;
+            }
+        }
+        fn decision(&mut self, _: &Decision) {}
+    }
+    let named = resolve("quad-x-motor2-loe").unwrap();
+    let fault = named.scenario.first_fault().unwrap();
+    let mut sink = Count {
+        j: 1,
+        from: fault.t + 5.0,
+        steps: [0; 2],
+        off: [0; 2],
+    };
+    let faulty = run_vehicle_scenario(&named, 1, false, &mut sink).unwrap();
+    for f in 0..2 {
+        let want = 100.0 * sink.off[f] as f64 / sink.steps[f] as f64;
+        let got = faulty.filters[f].metrics.gamma_off_after_5s_pct.unwrap();
+        assert!((got - want).abs() < 1e-9, "filter {f}: {got} vs {want}");
+    }
+    assert!(sink.steps[0] > 1000);
+    let healthy = run("quad-x-healthy-gusts", 1);
+    assert!(
+        healthy
+            .filters
+            .iter()
+            .all(|f| f.metrics.gamma_off_after_5s_pct.is_none())
+    );
+}

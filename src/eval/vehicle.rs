@@ -14,6 +14,8 @@ use std::time::Instant;
 const ISOLATE_WITHIN_S: f64 = 2.0;
 /// The class is judged on the decision in force this long after onset.
 const CLASS_AT_S: f64 = 5.0;
+/// The MIT-UKF's gamma should be within the tolerance of the truth from this long after onset.
+const GAMMA_WITHIN_S: f64 = 5.0;
 const TRACE_POINTS: usize = 2000;
 
 /// What a caller may want to see of every step (JSONL writers).
@@ -109,6 +111,8 @@ pub fn run_vehicle_scenario(
     let mut sq_g = [(0.0, 0usize); 2];
     let mut sq_d = [(0.0, 0usize); 2];
     let mut inside = [(0usize, 0usize); 2];
+    // Steps from 5 s after onset, and how many of them had gamma off by more than the tolerance.
+    let mut off_after = [(0usize, 0usize); 2];
     let mut traces = [Trace::default(), Trace::default()];
     let mut truth = Trace::default();
     let watch = target.unwrap_or(0);
@@ -162,6 +166,10 @@ pub fn run_vehicle_scenario(
             };
             if !ok {
                 last_violation[f] = Some(s.t);
+            }
+            if onset.is_some_and(|t0| s.t >= t0 + GAMMA_WITHIN_S) {
+                off_after[f].0 += 1;
+                off_after[f].1 += ((e.gamma - g_true).abs() > scn.eval.settle_tol_gamma) as usize;
             }
             if s.t >= steady_from {
                 sq_g[f].0 += (e.gamma - g_true).powi(2);
@@ -252,6 +260,8 @@ pub fn run_vehicle_scenario(
                         .iter()
                         .filter(|d| d.event == Event::ExcitationLow)
                         .count() as u32,
+                    gamma_off_after_5s_pct: (off_after[f].0 > 0)
+                        .then(|| 100.0 * off_after[f].1 as f64 / off_after[f].0 as f64),
                 },
                 trace: std::mem::take(&mut traces[f]),
                 decisions: mine.iter().map(|d| d.t).collect(),

@@ -14,7 +14,7 @@ pub fn render(rows: &[Row]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10} {:>6} {:>8} {:>4} {:<22}",
+        "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10} {:>9} {:>6} {:>8} {:>4} {:<22}",
         "scenario",
         "filter",
         "detect_s",
@@ -24,6 +24,7 @@ pub fn render(rows: &[Row]) -> String {
         "d_rmse_ss",
         "in_bnd%",
         "in_bnd>1s%",
+        "g_off>5s%",
         "false",
         "us/step",
         "iso",
@@ -32,7 +33,7 @@ pub fn render(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10.4} {:>10.5} {:>9.2} {:>10} {:>6} {:>8.2} {:>4} {:<22}",
+            "{:<24} {:<9} {:>9} {:>9} {:>9} {:>10.4} {:>10.5} {:>9.2} {:>10} {:>9} {:>6} {:>8.2} {:>4} {:<22}",
             r.scenario,
             r.filter,
             opt(r.detection_delay_s, 2),
@@ -42,6 +43,7 @@ pub fn render(rows: &[Row]) -> String {
             r.delta_rmse_steady,
             r.truth_in_bounds_pct,
             opt(Some(r.truth_in_bounds_after_1s_min_pct), 2),
+            opt(r.gamma_off_after_5s_pct, 1),
             r.false_decisions,
             r.us_per_step,
             match r.isolated_correct {
