@@ -234,9 +234,9 @@ fn gamma_off_after_5s_is_what_the_steps_say() {
             if s.t < self.from {
                 return;
             }
-            for f in 0..2 {
+            for (f, row) in est.iter().enumerate() {
                 self.steps[f] += 1;
-                self.off[f] += ((est[f][self.j].gamma - s.gamma[self.j]).abs() > 0.05) as usize;
+                self.off[f] += ((row[self.j].gamma - s.gamma[self.j]).abs() > 0.05) as usize;
             }
         }
         fn decision(&mut self, _: &Decision) {}
