@@ -997,21 +997,15 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
         for (stat, free, max, rec, current) in rows {
             // A statistic that stayed 0 (for one filter, or both: no angle outputs, for the
             // gain) has nothing to calibrate: the bisection's floor would read as a threshold.
-            let num = |v: f64, max: f64| {
-                if max == 0.0 {
-                    "-".to_string()
-                } else {
-                    format!("{v:.4}")
-                }
-            };
+            let num = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
             outln!(
                 "{:<24} {:<12} {:>7} {:<9} {:>14} {:>14} {:>10.4} {:>10.4} {:>11} {:>9}",
                 c.scenario,
                 c.vehicle,
                 c.seeds.len(),
                 stat,
-                num(free[0], max[0]),
-                num(free[1], max[1]),
+                num(free[0]),
+                num(free[1]),
                 max[0],
                 max[1],
                 rec.map_or("-".into(), |r| format!("{r:.3}")),

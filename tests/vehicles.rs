@@ -264,3 +264,35 @@ fn gamma_off_after_5s_is_what_the_steps_say() {
             .all(|f| f.metrics.gamma_off_after_5s_pct.is_none())
     );
 }
+
+/// Hexa X motor 5 stuck high looks, in the rates, like opposite motor 6 losing thrust: the
+/// first fault decision names motor 5, as the actuator or as the alternative in its detail
+/// (the isolation itself picks motor 6: README, issue 4 status).
+#[test]
+fn a_stuck_high_hexa_motor_is_at_least_named() {
+    use ahcmon::diagnose::vehicle::{Decision, Event};
+    use ahcmon::estimate::vehicle::AhcEstimate;
+    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
+    use ahcmon::sim::vehicle::VehicleSample;
+    struct Faults(Vec<Decision>);
+    impl StepSink for Faults {
+        fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
+        fn decision(&mut self, d: &Decision) {
+            if d.event == Event::Fault {
+                self.0.push(d.clone());
+            }
+        }
+    }
+    let named = resolve("hexa-x-motor5-stuck").unwrap();
+    for seed in 1..=3 {
+        let mut faults = Faults(vec![]);
+        run_vehicle_scenario(&named, seed, false, &mut faults).unwrap();
+        let first = faults.0.first().expect("no fault decision");
+        let named_motor5 = first.actuator.as_deref() == Some("motor5")
+            || first
+                .detail
+                .as_deref()
+                .is_some_and(|d| d.contains("or motor5 giving more"));
+        assert!(named_motor5, "seed {seed}: {first:?}");
+    }
+}

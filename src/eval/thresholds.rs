@@ -30,15 +30,16 @@ pub struct ThresholdCalibration {
     pub scenario: String,
     pub vehicle: String,
     pub seeds: Vec<u64>,
-    /// Per filter (MIT-UKF, MIT-ESMF): the smallest threshold with no alarm on any flight.
-    pub alarm_free: [f64; 2],
+    /// Per filter (MIT-UKF, MIT-ESMF): the smallest threshold with no alarm on any flight;
+    /// null for a filter whose statistic stayed 0.
+    pub alarm_free: [Option<f64>; 2],
     /// Per filter: the largest detection statistic seen after the warm-up.
     pub max_abs_deviation: [f64; 2],
     /// `MARGIN` × the larger of `alarm_free`; null when the statistic stayed 0 throughout
     /// (nothing to calibrate: a vehicle with only motors has no gain statistic).
     pub recommended: Option<f64>,
     /// The same three for the gain statistic.
-    pub gain_alarm_free: [f64; 2],
+    pub gain_alarm_free: [Option<f64>; 2],
     pub max_abs_gain_gap: [f64; 2],
     pub gain_recommended: Option<f64>,
 }
@@ -161,14 +162,17 @@ pub fn calibrate_threshold(
         (max_abs[k].iter().any(|&m| m > 0.0))
             .then(|| MARGIN * alarm_free[k][0].max(alarm_free[k][1]))
     };
+    let seen = |k: usize| -> [Option<f64>; 2] {
+        std::array::from_fn(|f| (max_abs[k][f] > 0.0).then_some(alarm_free[k][f]))
+    };
     Ok(ThresholdCalibration {
         scenario: named.name.clone(),
         vehicle: named.scenario.vehicle.clone(),
         seeds: seeds.to_vec(),
-        alarm_free: alarm_free[0],
+        alarm_free: seen(0),
         max_abs_deviation: max_abs[0],
         recommended: recommend(0),
-        gain_alarm_free: alarm_free[1],
+        gain_alarm_free: seen(1),
         max_abs_gain_gap: max_abs[1],
         gain_recommended: recommend(1),
     })
