@@ -261,11 +261,12 @@ const MIN_OWN_FRACTION: f64 = 0.25;
 const CLASS_HOLD_S: f64 = 1.0;
 
 /// A motor's excess explaining at least this fraction of what another motor's loss explains
-/// is named as the alternative in the decision. On a hexacopter opposite motors differ only in
-/// a_z (about 6 % of the information per step with the built-in profile's noise levels): a
-/// lone loss leaves its opposite motor's excess at 0.78 of it, so the hexacopter's motor
-/// decisions name it (rightly: the rates cannot tell them apart). On a quad X yaw adds to a_z
-/// and the ratio is 0.68: named only when the pattern is unclear. Half-way between the two.
+/// is named as the alternative in the decision, when the pair is one the airframe cannot tell
+/// apart: a pure loss of the one leaves the other's excess at least this share too. On a
+/// hexacopter opposite motors differ only in a_z (about 6 % of the information per step with
+/// the built-in profile's noise levels) and that share is 0.78, so its motor decisions name the
+/// opposite motor (rightly: the rates cannot tell them apart). On a quad X yaw adds to a_z and
+/// it is 0.68: never named. Half-way between the two.
 const ALTERNATIVE_SHARE: f64 = 0.73;
 
 /// Per-vehicle diagnosis over both filters.
@@ -424,8 +425,14 @@ impl Diagnoser {
                     (s > 0.0 && self.is_motor[m]).then(|| s * s * dot(&b[m], &b[m]))
                 };
                 let ej = sj * sj * dot(&b[j], &b[j]);
+                // Only a pair the airframe cannot tell apart: m's excess explains at least
+                // that share of a pure loss of j (cos² of their effects), whatever the noise.
+                let twin = |m: usize| {
+                    let c = dot(&b[m], &b[j]);
+                    c < 0.0 && c * c >= ALTERNATIVE_SHARE * dot(&b[m], &b[m]) * dot(&b[j], &b[j])
+                };
                 prior_decided = (0..l)
-                    .filter(|&m| m != j)
+                    .filter(|&m| m != j && twin(m))
                     .filter_map(|m| unweighted(m).map(|e| (m, e)))
                     .filter(|&(_, e)| e >= ALTERNATIVE_SHARE * ej)
                     .max_by(|p, q| p.1.total_cmp(&q.1))
