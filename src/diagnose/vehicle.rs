@@ -932,18 +932,23 @@ mod tests {
         assert_eq!(d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out), None);
     }
 
+    /// A healthy actuator's estimate: gamma 1 ± 0.1, delta 0 ± `delta_half`.
+    fn healthy_estimate(delta_half: f64) -> AhcEstimate {
+        AhcEstimate {
+            gamma: 1.0,
+            gamma_lo: 0.9,
+            gamma_hi: 1.1,
+            delta_lo: -delta_half,
+            delta_hi: delta_half,
+            ..Default::default()
+        }
+    }
+
     #[test]
     fn a_nan_estimate_spoils_no_attribution() {
         let p = Profile::resolve("quad-x").unwrap();
         let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
-        let healthy = AhcEstimate {
-            gamma: 1.0,
-            gamma_lo: 0.9,
-            gamma_hi: 1.1,
-            delta_lo: -0.1,
-            delta_hi: 0.1,
-            ..Default::default()
-        };
+        let healthy = healthy_estimate(0.1);
         let mut ukf = [healthy; 4];
         ukf[2].gamma = f64::NAN;
         let mut esmf = [healthy; 4];
@@ -964,14 +969,7 @@ mod tests {
         // effective output by about 0.03, under the deviation threshold, but the healthy gain
         // lies 0.47 outside the bounds. Gain bounds containing 1 give no statistic at all.
         let p = Profile::resolve("plane").unwrap();
-        let healthy = AhcEstimate {
-            gamma: 1.0,
-            gamma_lo: 0.9,
-            gamma_hi: 1.1,
-            delta_lo: -0.02,
-            delta_hi: 0.02,
-            ..Default::default()
-        };
+        let healthy = healthy_estimate(0.02);
         let mut est = [healthy; 3];
         est[1].gamma = 0.5;
         est[1].gamma_lo = 0.47;
