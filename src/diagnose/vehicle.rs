@@ -234,6 +234,9 @@ struct Channel {
 #[derive(Debug, Clone, Default)]
 struct ActuatorState {
     u: Moments,
+    /// The command's moments over the steps where neither filter's CUSUM had started: the
+    /// excitation the flight gives, without the step a controller makes to hide a fault.
+    u_quiet: Moments,
     channels: [Channel; 2],
     /// The class of the fault in force (None = healthy).
     active: Option<FaultClass>,
@@ -288,6 +291,19 @@ pub struct Diagnoser {
     /// Per filter, the last update's `(j, m)` from `explain` (motor `j`'s loss chosen, motor
     /// `m`'s excess nearly as good), for the decision's detail.
     prior_decided: [Option<(usize, usize)>; 2],
+}
+
+/// Relative command variation (std over mean) below which a range output's gain and offset
+/// are not told apart by the data: what separates them, `(gamma - 1)(u - mean u)`, is then under
+/// a tenth of the fault's effect `(gamma - 1) mean u`, so it needs about a hundred times the
+/// data that detected the fault.
+const SEPARABLE_REL_STD: f64 = 0.1;
+
+fn append_detail(d: &mut Decision, note: String) {
+    d.detail = Some(match d.detail.take() {
+        Some(prev) => format!("{prev}; {note}"),
+        None => note,
+    });
 }
 
 impl Diagnoser {
@@ -537,6 +553,9 @@ impl Diagnoser {
         for j in 0..l {
             let st = &mut self.actuators[j];
             st.u.push(u[j], a);
+            if st.channels.iter().all(|c| c.cusum == 0.0 && !c.alarm) {
+                st.u_quiet.push(u[j], a);
+            }
             let sigma_u = st.u.var.max(0.0).sqrt();
             gain_seen[j] = self.is_angle[j] && sigma_u >= p.excitation_min_std;
             for f in 0..2 {
@@ -682,11 +701,11 @@ impl Diagnoser {
                             self.actuators[j].u.var.sqrt()
                         ));
                     }
-                    if let Some(note) = self.alternative(j) {
-                        d.detail = Some(match d.detail.take() {
-                            Some(prev) => format!("{prev}; {note}"),
-                            None => note,
-                        });
+                    for note in [self.alternative(j), self.read_by_prior(j, c)]
+                        .into_iter()
+                        .flatten()
+                    {
+                        append_detail(&mut d, note);
                     }
                     out.push(d);
                     let st = &mut self.actuators[j];
@@ -721,6 +740,9 @@ impl Diagnoser {
                     if c != prev || union != st.active_filters {
                         let mut d = self.decision(t, j, Event::Changed, Some(c), union);
                         d.also = self.also(j);
+                        if let Some(note) = self.read_by_prior(j, c) {
+                            append_detail(&mut d, note);
+                        }
                         out.push(d);
                         let st = &mut self.actuators[j];
                         st.active = Some(c);
@@ -743,6 +765,30 @@ impl Diagnoser {
         Some(format!(
             "or {} giving more than commanded (stuck high?): it explains the measurements nearly as well, and a loss is the likelier fault",
             self.names[m]
+        ))
+    }
+
+    /// A motor or throttle whose command barely moves about its operating point (measured
+    /// before the alarm: the controller's step that hides the fault is no excitation, it
+    /// coincides with the fault): its gain and offset changes look alike there, so the class came from the filters' prior (motors lose
+    /// gain), not from the data. Says so, with the reading the data could not rule out.
+    fn read_by_prior(&self, j: usize, class: FaultClass) -> Option<String> {
+        let st = &self.actuators[j];
+        let (mean, sd) = (st.u.mean, st.u_quiet.var.max(0.0).sqrt());
+        if self.is_angle[j] || mean.abs() < 1e-3 || sd >= SEPARABLE_REL_STD * mean.abs() {
+            return None;
+        }
+        let e = st.channels[0].last;
+        // The change of the effective output at the operating point, read the other way.
+        let effect = (e.gamma - 1.0) * mean + e.delta;
+        let other = match class {
+            FaultClass::LossOfEffectiveness => format!("an offset of {effect:+.3}"),
+            FaultClass::Bias => format!("a gain of {:.2}", 1.0 + effect / mean),
+            _ => return None,
+        };
+        Some(format!(
+            "the command moved only {:.0} % about {mean:.2}, where a gain change and an offset look alike: {other} would fit as well",
+            100.0 * sd / mean.abs()
         ))
     }
 
@@ -930,6 +976,44 @@ mod tests {
         let d = diagnoser("quad-x");
         let mut out = [0.0; 4];
         assert_eq!(d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out), None);
+    }
+
+    #[test]
+    fn a_motor_class_the_data_cannot_separate_says_what_else_fits() {
+        // Quad X motor 2 at gamma 0.7 about a mean command of 0.5: moving by 4 % (a hover with
+        // dither), a loss of 0.3 and an offset of -0.15 look alike, and the decision says so;
+        // moving by 30 % (climbs and descents), the data tells them apart and it does not.
+        let p = Profile::resolve("quad-x").unwrap();
+        let healthy = healthy_estimate(0.02);
+        let mut est = [healthy; 4];
+        est[1].gamma = 0.7;
+        est[1].gamma_lo = 0.65;
+        est[1].gamma_hi = 0.75;
+        let first_fault = |moving: f64| {
+            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+            let mut out = vec![];
+            for k in 0..500 {
+                let t = k as f64 * 0.02;
+                let u = 0.5 + moving * (t * 4.0).sin();
+                d.update(t, &[u; 4], &[&est, &est], &mut out);
+                if let Some(f) = out.iter().find(|x| x.event == Event::Fault) {
+                    return f.clone();
+                }
+                out.clear();
+            }
+            panic!("no fault decided (moving {moving})");
+        };
+        let hover = first_fault(0.03);
+        assert_eq!(hover.actuator.as_deref(), Some("motor2"));
+        assert_eq!(hover.class, Some(FaultClass::LossOfEffectiveness));
+        let detail = hover.detail.unwrap_or_default();
+        assert!(detail.contains("an offset of -0.15"), "{detail}");
+        let manoeuvring = first_fault(0.2);
+        assert_eq!(manoeuvring.actuator.as_deref(), Some("motor2"));
+        assert!(
+            !manoeuvring.detail.unwrap_or_default().contains("offset"),
+            "a well-excited motor needs no caveat"
+        );
     }
 
     /// A healthy actuator's estimate: gamma 1 ± 0.1, delta 0 ± `delta_half`.
