@@ -67,6 +67,9 @@ struct StoredSample {
 const U_HISTORY: usize = crate::telemetry::profile::MAX_ARX_DELAY + 1;
 /// Longest command delay the identification considers (s).
 const MAX_DELAY_S: f64 = 0.12;
+/// Longest interval between two calibration samples, in median sample periods, that still
+/// counts as one step: a dropped sample doubles it, and the change over it is not one step's.
+const CALIBRATION_MAX_INTERVAL: f64 = 1.5;
 
 struct Running {
     profile: Profile,
@@ -108,6 +111,9 @@ pub struct PipelineCounters {
     pub filter_errors: u64,
     /// Gaps of more than five sample periods between samples while estimating.
     pub gaps: u64,
+    /// Intervals of more than 1.5 sample periods in the calibration stretch (the steps across
+    /// them are left out of the fit).
+    pub calibration_gaps: u64,
     /// Samples dropped for lack of a_z when the model measures it.
     pub missing_az: u64,
     pub decisions: u64,
@@ -469,19 +475,37 @@ impl VehiclePipeline {
             profile.model.measure_az = false;
         }
         // The outputs of sample k act until sample k+1: pair each rate with the previous outputs.
-        let shifted: Vec<CalibrationSample> = samples
-            .windows(2)
-            .map(|w| CalibrationSample {
-                rates: w[1].rates,
-                u: &w[0].u[..l],
-                az: if profile.model.measure_az {
-                    w[1].az
-                } else {
-                    None
-                },
-            })
-            .filter(|c| !profile.model.measure_az || c.az.is_some())
-            .collect();
+        // A pair whose interval is not one period (a dropped or late sample, a link gap) is left
+        // out, and so is one without a_z when a_z is fitted; the next pair then starts a new
+        // run, so no fit row spans the hole.
+        let measure_az = profile.model.measure_az;
+        let mut shifted: Vec<CalibrationSample> = Vec::with_capacity(samples.len());
+        let (mut kept_previous, mut gaps) = (false, 0u64);
+        for w in samples.windows(2) {
+            let interval = w[1].t - w[0].t;
+            let regular = interval > 0.0 && interval <= CALIBRATION_MAX_INTERVAL * dt;
+            gaps += u64::from(!regular);
+            let az = if measure_az { w[1].az } else { None };
+            let keep = regular && (!measure_az || az.is_some());
+            if keep {
+                shifted.push(CalibrationSample {
+                    rates: w[1].rates,
+                    u: &w[0].u[..l],
+                    az,
+                    follows_previous: kept_previous,
+                });
+            }
+            kept_previous = keep;
+        }
+        if gaps > 0 {
+            self.counters.calibration_gaps += gaps;
+            sink.message(
+                self.sysid,
+                &format!(
+                    "calibration: {gaps} gaps in the telemetry (intervals over {CALIBRATION_MAX_INTERVAL} sample periods); the fit leaves out the steps across them"
+                ),
+            );
+        }
         let base = profile.rate_params();
         let identified = if profile.model.dynamics == Dynamics::Arx {
             // Above ~58 Hz the history, not MAX_DELAY_S, bounds the delay searched.
@@ -612,5 +636,85 @@ impl VehiclePipeline {
             est: [[AhcEstimate::default(); MAX_ACTUATORS]; 2],
             decisions: Vec::with_capacity(8),
         }));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
+
+    #[derive(Debug, Default)]
+    struct Messages(Vec<String>);
+    impl PipelineSink for Messages {
+        fn decision(&mut self, _: &Decision, _: &Profile) {}
+        fn message(&mut self, _: u8, text: &str) {
+            self.0.push(text.to_owned());
+        }
+        fn link_event(&mut self, _: &Decision) {}
+    }
+
+    /// Flies the simulated quad through the pipeline; with `lossy`, one sample in ten never
+    /// arrives. Returns the pipeline, its messages and the samples lost while calibrating.
+    fn fly_quad(lossy: bool) -> (VehiclePipeline, Messages, u64) {
+        let profile = Profile::resolve("quad-x").unwrap();
+        let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 3)).unwrap();
+        let cfg = PipelineConfig {
+            profile: Some(profile.clone()),
+            ..PipelineConfig::default()
+        };
+        let mut pipeline = VehiclePipeline::new(1, cfg);
+        let mut sink = Messages::default();
+        let info = VehicleInfo::default();
+        let mut lost_in_stretch = 0;
+        for k in 0..2000 {
+            let s = sim.step();
+            if lossy && k % 10 == 9 {
+                let calibrating = matches!(pipeline.stage, Stage::Calibrating { .. });
+                lost_in_stretch += u64::from(calibrating);
+                continue;
+            }
+            let mut pwm = [0u16; 16];
+            for (j, a) in profile.actuators.iter().enumerate() {
+                pwm[usize::from(a.channel) - 1] = profile.to_pwm(j, s.u[j]).round() as u16;
+            }
+            let sample = TelemetrySample {
+                t: s.t,
+                rates: [s.y[0], s.y[1], s.y[2]],
+                attitude: s.attitude,
+                az: profile.model.measure_az.then_some(s.y[3]),
+                pwm,
+                armed: true,
+                rel_alt: Some(10.0),
+            };
+            pipeline.on_sample(&sample, &info, &mut sink);
+        }
+        (pipeline, sink, lost_in_stretch)
+    }
+
+    /// One sample in ten lost during the calibration stretch: every hole is counted and said
+    /// once, and the fit on what is left scales the axes as the fit on the whole stretch does.
+    #[test]
+    fn calibration_counts_the_holes_and_fits_around_them() {
+        let (whole, said_whole, _) = fly_quad(false);
+        let (lossy, said, lost) = fly_quad(true);
+        for p in [&whole, &lossy] {
+            assert!(matches!(p.stage, Stage::Running(_)), "{said:?}");
+        }
+        assert_eq!(whole.counters.calibration_gaps, 0);
+        assert!(!said_whole.0.iter().any(|m| m.contains("gaps")));
+        // Holes at the very start or end of the stretch may fall outside what it kept.
+        let counted = lossy.counters.calibration_gaps;
+        assert!(
+            counted <= lost && counted + 2 >= lost && counted >= 90,
+            "{counted} of {lost}"
+        );
+        let gaps: Vec<_> = said.0.iter().filter(|m| m.contains("gaps")).collect();
+        assert_eq!(gaps.len(), 1, "{:?}", said.0);
+        assert!(gaps[0].contains(&format!("{counted} gaps")), "{}", gaps[0]);
+        let (a, b) = (whole.fit.unwrap().scale, lossy.fit.unwrap().scale);
+        for axis in 0..3 {
+            assert!((a[axis] - b[axis]).abs() < 0.02, "scales {a:?} and {b:?}");
+        }
     }
 }

@@ -121,6 +121,7 @@ fn calibration_recovers_damping_and_effectiveness() {
                 rates: [s.y[0], s.y[1], s.y[2]],
                 u: &s.u[..l],
                 az: az.then_some(s.y[3]),
+                follows_previous: true,
             })
             .collect();
         let (fit, quality) = calibrate(&cal, 0.02, fit_offset).unwrap();
@@ -295,4 +296,51 @@ fn a_stuck_high_hexa_motor_is_at_least_named() {
                 .is_some_and(|d| d.contains("or motor5 giving more"));
         assert!(named_motor5, "seed {seed}: {first:?}");
     }
+}
+
+/// A lossy link during the calibration stretch (one sample in 10 lost, as on a radio at range):
+/// the steps across each hole are left out of the fit (`follows_previous: false` on the sample
+/// after it), so the fit is as good as on the full stretch. Joined as if consecutive, every
+/// hole gives a row whose change spans two steps, and the fit is off.
+#[test]
+fn calibration_leaves_out_the_steps_across_gaps() {
+    let profile = Profile::resolve("plane").unwrap();
+    let truth = profile.rate_params();
+    let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 5)).unwrap();
+    let l = profile.actuators.len();
+    let samples: Vec<_> = (0..3000).map(|_| sim.step()).collect();
+    let lost = |k: usize| k % 10 == 9;
+    let fit_with = |marked: bool| {
+        let cal: Vec<CalibrationSample> = samples
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| !lost(*k))
+            .map(|(k, s)| CalibrationSample {
+                rates: [s.y[0], s.y[1], s.y[2]],
+                u: &s.u[..l],
+                az: None,
+                follows_previous: !(marked && k > 0 && lost(k - 1)),
+            })
+            .collect();
+        let (fit, _) = calibrate(&cal, 0.02, true).unwrap();
+        // Worst relative error of D, and of G relative to each axis's largest entry.
+        (0..3)
+            .map(|i| {
+                let scale = (0..l)
+                    .map(|j| truth.effectiveness[j][i].abs())
+                    .fold(0.0, f64::max);
+                let g = (0..l)
+                    .map(|j| (fit.effectiveness[j][i] - truth.effectiveness[j][i]).abs() / scale)
+                    .fold(0.0, f64::max);
+                ((fit.damping[i] - truth.damping[i]).abs() / truth.damping[i]).max(g)
+            })
+            .fold(0.0, f64::max)
+    };
+    let (marked, joined) = (fit_with(true), fit_with(false));
+    println!("worst relative error: holes left out {marked:.4}, joined {joined:.4}");
+    assert!(marked < 0.05, "holes left out: {marked}");
+    assert!(
+        joined > 0.05 && joined > 5.0 * marked,
+        "joined across the holes: {joined} (left out: {marked})"
+    );
 }

@@ -45,6 +45,32 @@ pub struct CalibrationSample<'a> {
     pub rates: [f64; 3],
     pub u: &'a [f64],
     pub az: Option<f64>,
+    /// This sample comes one period after the previous one in the slice (false after a gap
+    /// in the telemetry). A fit row spans several consecutive samples; rows across a gap
+    /// would take the change over the gap for one step's, so they are left out.
+    pub follows_previous: bool,
+}
+
+/// For every sample, the index where its unbroken run of samples starts.
+fn run_starts(samples: &[CalibrationSample]) -> Vec<usize> {
+    let mut starts = Vec::with_capacity(samples.len());
+    for (k, s) in samples.iter().enumerate() {
+        let start = if k > 0 && s.follows_previous {
+            starts[k - 1]
+        } else {
+            k
+        };
+        starts.push(start);
+    }
+    starts
+}
+
+/// The indices `k` for which samples `k - before ..= k + after` are one unbroken run.
+fn unbroken_rows(samples: &[CalibrationSample], before: usize, after: usize) -> Vec<usize> {
+    let starts = run_starts(samples);
+    (before..samples.len().saturating_sub(after))
+        .filter(|&k| starts[k + after] + before <= k)
+        .collect()
 }
 
 /// Identify the model from consecutive samples at period `dt`. With `fit_offset = false` the
@@ -74,7 +100,15 @@ pub fn calibrate(
         return Err(CalibrationError::NonFinite);
     }
     // Rows start at k = 1 so that the previous rate can serve as the instrument.
-    let n = samples.len() - 2;
+    let rows = unbroken_rows(samples, 1, 1);
+    let n = rows.len();
+    if n < need {
+        return Err(CalibrationError::TooFew {
+            got: n + 1,
+            need: need + 1,
+            l,
+        });
+    }
     let mut params = RateParams {
         damping: [0.0; 3],
         effectiveness: vec![[0.0; 3]; l],
@@ -91,9 +125,8 @@ pub fn calibrate(
         let mut x = DMatrix::<f64>::zeros(n, cols);
         let mut z = DMatrix::<f64>::zeros(n, cols);
         let mut y = DVector::<f64>::zeros(n);
-        for r in 0..n {
+        for (r, &k) in rows.iter().enumerate() {
             // Row r: the step from sample k to k+1 under the commands of sample k+1.
-            let k = r + 1;
             x[(r, 0)] = samples[k].rates[axis];
             z[(r, 0)] = samples[k - 1].rates[axis];
             for j in 0..l {
@@ -239,7 +272,15 @@ pub fn calibrate_scaled(
     if !ok {
         return Err(CalibrationError::NonFinite);
     }
-    let n = samples.len() - 2;
+    let rows = unbroken_rows(samples, 1, 1);
+    let n = rows.len();
+    if n < need {
+        return Err(CalibrationError::TooFew {
+            got: n + 2,
+            need: need + 2,
+            l,
+        });
+    }
     let mut params = base.clone();
     let mut quality = FitQuality {
         r_squared: vec![],
@@ -255,8 +296,7 @@ pub fn calibrate_scaled(
         let mut x = DMatrix::<f64>::zeros(n, 3);
         let mut z = DMatrix::<f64>::zeros(n, 3);
         let mut y = DVector::<f64>::zeros(n);
-        for r in 0..n {
-            let k = r + 1;
+        for (r, &k) in rows.iter().enumerate() {
             let g = drive(axis, samples[k + 1].u);
             x[(r, 0)] = samples[k].rates[axis];
             z[(r, 0)] = samples[k - 1].rates[axis];
@@ -297,18 +337,19 @@ pub fn calibrate_scaled(
                 let a = (-d * dt).exp();
                 let hold = if d * dt > 1e-12 { (1.0 - a) / d } else { dt };
                 let mut sum = 0.0;
-                for k in 0..n + 1 {
+                // The rows' steps (k to k+1), which lie within unbroken runs.
+                for &k in &rows {
                     let s0 = &samples[k];
                     let s1 = &samples[k + 1];
                     sum += (s1.rates[axis] - a * s0.rates[axis]) / hold - drive(axis, s1.u);
                 }
-                let c = sum / (n + 1) as f64;
+                let c = sum / n as f64;
                 params.offset[axis] = c;
                 let mut rss = 0.0;
                 let mut tss = 0.0;
                 let mean =
                     samples.iter().map(|s| s.rates[axis]).sum::<f64>() / samples.len() as f64;
-                for k in 0..n + 1 {
+                for &k in &rows {
                     let (s0, s1) = (&samples[k], &samples[k + 1]);
                     let pred = a * s0.rates[axis] + hold * (drive(axis, s1.u) + c);
                     rss += (s1.rates[axis] - pred).powi(2);
@@ -439,9 +480,18 @@ pub fn calibrate_arx(
     if !ok {
         return Err(CalibrationError::NonFinite);
     }
-    // Rows k = first..n: all delays are fitted on the same rows so their residuals compare.
+    // Rows k with samples k - first ..= k unbroken: all delays are fitted on the same rows so
+    // their residuals compare.
     let first = max_delay.max(2);
-    let rows = samples.len() - first;
+    let row_ks = unbroken_rows(samples, first, 0);
+    let rows = row_ks.len();
+    if rows + first < need {
+        return Err(CalibrationError::TooFew {
+            got: rows + first,
+            need,
+            l,
+        });
+    }
     // Per axis the coefficients and (R², residual std); and the summed unexplained fraction.
     type DelayFit = (Vec<DVector<f64>>, Vec<(f64, f64)>, f64);
     let fit_delay = |d: usize| -> Option<DelayFit> {
@@ -451,8 +501,7 @@ pub fn calibrate_arx(
         for axis in 0..3 {
             let mut x = DMatrix::<f64>::zeros(rows, cols);
             let mut y = DVector::<f64>::zeros(rows);
-            for r in 0..rows {
-                let k = first + r;
+            for (r, &k) in row_ks.iter().enumerate() {
                 let (w2, w1, w0) = (
                     &samples[k - 2].rates,
                     &samples[k - 1].rates,
@@ -520,8 +569,9 @@ pub fn calibrate_arx(
         residual_std: q.iter().map(|v| v.1).collect(),
         samples: rows,
     };
-    let with_az: Vec<_> = (first..samples.len())
-        .filter_map(|k| samples[k].az.map(|a| (a, samples[k - delay].u)))
+    let with_az: Vec<_> = row_ks
+        .iter()
+        .filter_map(|&k| samples[k].az.map(|a| (a, samples[k - delay].u)))
         .collect();
     let mut vertical_scaled = false;
     if let Some(v) = fit_vertical(&with_az, &base.vertical) {
@@ -607,6 +657,7 @@ mod tests {
                 rates: measured[k],
                 u: &u[k],
                 az: None,
+                follows_previous: true,
             })
             .collect();
         let base = RateParams {

@@ -46,10 +46,11 @@ pub fn render(
         let pc = &p.counters;
         let _ = writeln!(
             s,
-            "  pipeline: {}; {} filter steps, {} gaps, {} filter resets, {} samples without a_z",
+            "  pipeline: {}; {} filter steps, {} gaps ({} while calibrating), {} filter resets, {} samples without a_z",
             p.stage_name(),
             pc.steps,
             pc.gaps,
+            pc.calibration_gaps,
             pc.filter_errors,
             pc.missing_az
         );
