@@ -395,6 +395,31 @@ struct VerticalFit {
     scale: f64,
 }
 
+/// Largest standard error of a fitted scale, relative to the scale, for it to replace the
+/// geometry's.
+const MAX_SCALE_REL_ERROR: f64 = 0.1;
+
+/// Standard error of the first coefficient of a fit on `[g, 1]` columns, with the residuals'
+/// lag-1 autocorrelation `r1` widening it by `√((1 + r1)/(1 - r1))`.
+fn slope_std_error(x: &DMatrix<f64>, y: &DVector<f64>, beta: &DVector<f64>) -> f64 {
+    let n = y.len();
+    let resid = y - x * beta;
+    let rss = resid.norm_squared();
+    if n < 3 || rss <= 0.0 {
+        return 0.0;
+    }
+    let lag1: f64 = (1..n).map(|k| resid[k] * resid[k - 1]).sum();
+    let r1 = (lag1 / rss).clamp(0.0, 0.999);
+    let g = x.column(0);
+    let mean = g.mean();
+    let sxx: f64 = g.iter().map(|v| (v - mean).powi(2)).sum();
+    if sxx <= 0.0 {
+        return f64::INFINITY;
+    }
+    let var = rss / (n - 2) as f64 / sxx;
+    (var * (1.0 + r1) / (1.0 - r1)).sqrt()
+}
+
 fn fit_vertical(with_az: &[(f64, &[f64])], base_vertical: &[f64]) -> Option<VerticalFit> {
     let l = with_az.first()?.1.len();
     if base_vertical.len() != l {
@@ -408,7 +433,14 @@ fn fit_vertical(with_az: &[(f64, &[f64])], base_vertical: &[f64]) -> Option<Vert
         x[(k, 1)] = 1.0;
         y[k] = *a;
     }
-    let fitted = least_squares(&x, &y).filter(|(beta, _, _)| (0.1..=10.0).contains(&beta[0]));
+    // The scale must be determined by the data: its standard error, widened for residuals
+    // correlated in time (gusts, a climb: AR(1) variance factor (1 + r1)/(1 - r1)), within a
+    // tenth of it. A hover whose summed thrust barely moves fits a_z's noise with any scale
+    // (measured: x0.14 at R² = 0.01 in gusts), and then keeps the geometry's.
+    let fitted = least_squares(&x, &y).filter(|(beta, _, _)| {
+        (0.1..=10.0).contains(&beta[0])
+            && slope_std_error(&x, &y, beta) <= MAX_SCALE_REL_ERROR * beta[0]
+    });
     Some(match fitted {
         Some((beta, r2, sd)) => VerticalFit {
             vertical: base_vertical.iter().map(|v| v * beta[0]).collect(),
@@ -694,5 +726,43 @@ mod tests {
             "{:?}",
             fit.quality
         );
+    }
+
+    /// The a_z scale replaces the geometry's only when the data determine it: thrust that
+    /// moves against white noise gives the true scale; thrust that barely moves against a
+    /// slow (gust-like) disturbance fits noise, and the geometry is kept.
+    #[test]
+    fn the_a_z_scale_is_taken_only_when_the_data_determine_it() {
+        let base = [-2.0, -2.0];
+        let fit = |moving: f64, tau_steps: f64| {
+            let mut rng = Rng::new(7);
+            let us: Vec<[f64; 2]> = (0..1000)
+                .map(|k| {
+                    let s = moving * (k as f64 * 0.05).sin();
+                    [0.5 + s, 0.5 - 0.5 * s]
+                })
+                .collect();
+            // First-order disturbance with the given correlation time (steps), std 0.3.
+            let a = (-1.0 / tau_steps).exp();
+            let mut d = 0.0;
+            let with_az: Vec<(f64, &[f64])> = us
+                .iter()
+                .map(|u| {
+                    d = a * d + 0.3 * (1.0 - a * a).sqrt() * rng.normal();
+                    (1.5 * (base[0] * u[0] + base[1] * u[1]) - 9.8 + d, &u[..])
+                })
+                .collect();
+            fit_vertical(&with_az, &base).unwrap()
+        };
+        let excited = fit(0.4, 1.0);
+        assert!(
+            excited.scaled && (excited.scale - 1.5).abs() < 0.1,
+            "{:?}",
+            excited.scale
+        );
+        // Least squares alone takes x3.05 here (measured; the truth is x1.5).
+        let still = fit(0.05, 50.0);
+        assert!(!still.scaled && still.scale == 1.0, "{:?}", still.scale);
+        assert_eq!(still.vertical, base.to_vec());
     }
 }
