@@ -114,7 +114,7 @@ pub struct PipelineCounters {
     /// Intervals of more than 1.5 sample periods in the calibration stretch (the steps across
     /// them are left out of the fit).
     pub calibration_gaps: u64,
-    /// Samples dropped for lack of a_z when the model measures it.
+    /// Samples dropped for lack of a_z when the model measures it (while calibrating too).
     pub missing_az: u64,
     pub decisions: u64,
 }
@@ -487,6 +487,7 @@ impl VehiclePipeline {
             gaps += u64::from(!regular);
             let az = if measure_az { w[1].az } else { None };
             let keep = regular && (!measure_az || az.is_some());
+            self.counters.missing_az += u64::from(regular && measure_az && az.is_none());
             if keep {
                 shifted.push(CalibrationSample {
                     rates: w[1].rates,
@@ -502,7 +503,7 @@ impl VehiclePipeline {
             sink.message(
                 self.sysid,
                 &format!(
-                    "calibration: {gaps} gaps in the telemetry (intervals over {CALIBRATION_MAX_INTERVAL} sample periods); the fit leaves out the steps across them"
+                    "calibration: {gaps} gaps in the telemetry (intervals over {CALIBRATION_MAX_INTERVAL} sample periods, or not increasing); the fit leaves out the steps across them"
                 ),
             );
         }

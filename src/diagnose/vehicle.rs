@@ -228,15 +228,22 @@ struct Channel {
     excursion: f64,
     /// The attributed gain statistic (see `update`).
     gain_gap: f64,
+    /// The last step's detection ratio (statistic over its threshold).
+    ratio: f64,
 }
 
 /// The actuator-level state across filters.
 #[derive(Debug, Clone, Default)]
 struct ActuatorState {
     u: Moments,
-    /// The command's moments over the steps where neither filter's CUSUM had started: the
-    /// excitation the flight gives, without the step a controller makes to hide a fault.
+    /// The command's moments over the steps where both filters' statistics were well under
+    /// their thresholds (ratio below `QUIET_RATIO`, CUSUM at 0): the excitation the flight
+    /// gives, without the step a controller makes to hide a fault.
     u_quiet: Moments,
+    /// The std of `u_quiet` at each of the last few whole seconds: the alarm can come a while
+    /// after the fault, and the smallest of these predates the controller's step.
+    quiet_sd: [Option<f64>; QUIET_SNAPSHOTS],
+    quiet_sd_t: f64,
     channels: [Channel; 2],
     /// The class of the fault in force (None = healthy).
     active: Option<FaultClass>,
@@ -292,6 +299,12 @@ pub struct Diagnoser {
     /// `m`'s excess nearly as good), for the decision's detail.
     prior_decided: [Option<(usize, usize)>; 2],
 }
+
+/// Seconds of `u_quiet` std snapshots kept (see `ActuatorState::quiet_sd`).
+const QUIET_SNAPSHOTS: usize = 4;
+
+/// Detection ratio under which a step counts as quiet for the command's excitation.
+const QUIET_RATIO: f64 = 0.5;
 
 /// Relative command variation (std over mean) below which a range output's gain and offset
 /// are not told apart by the data: what separates them, `(gamma - 1)(u - mean u)`, is then under
@@ -553,8 +566,17 @@ impl Diagnoser {
         for j in 0..l {
             let st = &mut self.actuators[j];
             st.u.push(u[j], a);
-            if st.channels.iter().all(|c| c.cusum == 0.0 && !c.alarm) {
+            if st
+                .channels
+                .iter()
+                .all(|c| c.cusum == 0.0 && !c.alarm && c.ratio < QUIET_RATIO)
+            {
                 st.u_quiet.push(u[j], a);
+            }
+            if st.u_quiet.init && t - st.quiet_sd_t >= 1.0 {
+                st.quiet_sd.rotate_right(1);
+                st.quiet_sd[0] = Some(st.u_quiet.var.max(0.0).sqrt());
+                st.quiet_sd_t = t;
             }
             let sigma_u = st.u.var.max(0.0).sqrt();
             gain_seen[j] = self.is_angle[j] && sigma_u >= p.excitation_min_std;
@@ -616,6 +638,7 @@ impl Diagnoser {
                 ch.gain_gap = explained[2][f][j];
                 let ratio = (explained[0][f][j].hypot(explained[1][f][j]) / p.threshold)
                     .max(explained[2][f][j].abs() / p.gain_threshold);
+                ch.ratio = ratio;
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
                 if !warm {
                     ch.cusum = 0.0;
@@ -701,7 +724,7 @@ impl Diagnoser {
                             self.actuators[j].u.var.sqrt()
                         ));
                     }
-                    for note in [self.alternative(j), self.read_by_prior(j, c)]
+                    for note in [self.alternative(j), self.read_by_prior(j, c, t)]
                         .into_iter()
                         .flatten()
                     {
@@ -740,7 +763,7 @@ impl Diagnoser {
                     if c != prev || union != st.active_filters {
                         let mut d = self.decision(t, j, Event::Changed, Some(c), union);
                         d.also = self.also(j);
-                        if let Some(note) = self.read_by_prior(j, c) {
+                        if let Some(note) = self.read_by_prior(j, c, t) {
                             append_detail(&mut d, note);
                         }
                         out.push(d);
@@ -768,13 +791,29 @@ impl Diagnoser {
         ))
     }
 
-    /// A motor or throttle whose command barely moves about its operating point (measured
-    /// before the alarm: the controller's step that hides the fault is no excitation, it
-    /// coincides with the fault): its gain and offset changes look alike there, so the class came from the filters' prior (motors lose
-    /// gain), not from the data. Says so, with the reading the data could not rule out.
-    fn read_by_prior(&self, j: usize, class: FaultClass) -> Option<String> {
+    /// A motor or throttle whose command barely moves about its operating point: its gain and
+    /// offset changes look alike there, so the class came from the filters' prior (motors
+    /// lose gain), not from the data. Says so, with the reading the data could not rule out.
+    fn read_by_prior(&self, j: usize, class: FaultClass, t: f64) -> Option<String> {
         let st = &self.actuators[j];
-        let (mean, sd) = (st.u.mean, st.u_quiet.var.max(0.0).sqrt());
+        let mean = st.u.mean;
+        // The variation before the alarm: the controller's step that hides the fault is no
+        // excitation (it coincides with the fault). Long after the alarm, when that step has
+        // left the window, the variation since (manoeuvres may have separated them by now).
+        let since = st
+            .channels
+            .iter()
+            .filter(|c| c.alarm)
+            .map(|c| c.alarm_since)
+            .fold(t, f64::min);
+        let sd = if st.u_quiet.init && t - since < 3.0 * self.params.window_s {
+            st.quiet_sd
+                .iter()
+                .flatten()
+                .fold(st.u_quiet.var.max(0.0).sqrt(), |m, &x| m.min(x))
+        } else {
+            st.u.var.max(0.0).sqrt()
+        };
         if self.is_angle[j] || mean.abs() < 1e-3 || sd >= SEPARABLE_REL_STD * mean.abs() {
             return None;
         }
@@ -980,22 +1019,27 @@ mod tests {
 
     #[test]
     fn a_motor_class_the_data_cannot_separate_says_what_else_fits() {
-        // Quad X motor 2 at gamma 0.7 about a mean command of 0.5: moving by 4 % (a hover with
-        // dither), a loss of 0.3 and an offset of -0.15 look alike, and the decision says so;
-        // moving by 30 % (climbs and descents), the data tells them apart and it does not.
+        // Quad X, motor 2 loses 30 % at 5 s: its gamma estimate ramps to 0.7 over 0.5 s while
+        // the controller steps its command from 0.5 to 0.71 to hide the loss. With the command
+        // otherwise moving by 4 % (a hover with dither), a loss of 0.3 and an offset of
+        // -0.3 x 0.71 look alike, and the decision says so: the step is no excitation. Moving
+        // by 30 % (climbs and descents), the data tell them apart, and it does not.
         let p = Profile::resolve("quad-x").unwrap();
         let healthy = healthy_estimate(0.02);
-        let mut est = [healthy; 4];
-        est[1].gamma = 0.7;
-        est[1].gamma_lo = 0.65;
-        est[1].gamma_hi = 0.75;
         let first_fault = |moving: f64| {
             let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
             let mut out = vec![];
-            for k in 0..500 {
+            for k in 0..1000 {
                 let t = k as f64 * 0.02;
-                let u = 0.5 + moving * (t * 4.0).sin();
-                d.update(t, &[u; 4], &[&est, &est], &mut out);
+                let lost = 0.3 * ((t - 5.0) / 0.5).clamp(0.0, 1.0);
+                let mut est = [healthy; 4];
+                est[1].gamma = 1.0 - lost;
+                est[1].gamma_lo = est[1].gamma - 0.05;
+                est[1].gamma_hi = est[1].gamma + 0.05;
+                let trim = if t < 5.0 { 0.5 } else { 0.5 / 0.7 };
+                let mut u = [0.5 + moving * (t * 4.0).sin(); 4];
+                u[1] = trim + moving * (t * 4.0).sin();
+                d.update(t, &u, &[&est, &est], &mut out);
                 if let Some(f) = out.iter().find(|x| x.event == Event::Fault) {
                     return f.clone();
                 }
@@ -1007,7 +1051,21 @@ mod tests {
         assert_eq!(hover.actuator.as_deref(), Some("motor2"));
         assert_eq!(hover.class, Some(FaultClass::LossOfEffectiveness));
         let detail = hover.detail.unwrap_or_default();
-        assert!(detail.contains("an offset of -0.15"), "{detail}");
+        let number_after = |key: &str| -> f64 {
+            let rest =
+                &detail[detail.find(key).unwrap_or_else(|| panic!("{detail}")) + key.len()..];
+            let end = rest.find(|c: char| c != '-' && c != '+' && c != '.' && !c.is_ascii_digit());
+            rest[..end.unwrap_or(rest.len())].parse().unwrap()
+        };
+        let (moved, mean, offset) = (
+            number_after("moved only "),
+            number_after("% about "),
+            number_after("an offset of "),
+        );
+        assert!(moved < 10.0, "{detail}");
+        // The offset that gives the same output at the operating point: (gamma - 1) * mean.
+        let gamma = hover.gamma.unwrap();
+        assert!((offset - (gamma - 1.0) * mean).abs() < 0.01, "{detail}");
         let manoeuvring = first_fault(0.2);
         assert_eq!(manoeuvring.actuator.as_deref(), Some("motor2"));
         assert!(

@@ -102,9 +102,10 @@ pub fn calibrate(
     // Rows start at k = 1 so that the previous rate can serve as the instrument.
     let rows = unbroken_rows(samples, 1, 1);
     let n = rows.len();
-    if n < need {
+    // Unbroken, need + 1 samples give need - 1 rows (the first check's bar).
+    if n + 1 < need {
         return Err(CalibrationError::TooFew {
-            got: n + 1,
+            got: n + 2,
             need: need + 1,
             l,
         });
@@ -400,12 +401,16 @@ struct VerticalFit {
 const MAX_SCALE_REL_ERROR: f64 = 0.1;
 
 /// Standard error of the first coefficient of a fit on `[g, 1]` columns, with the residuals'
-/// lag-1 autocorrelation `r1` widening it by `√((1 + r1)/(1 - r1))`.
+/// lag-1 autocorrelation `r1` widening it by `√((1 + r1)/(1 - r1))`: the AR(1) factor for a
+/// regressor as persistent as the residual, an upper bound (conservative) for a faster one.
 fn slope_std_error(x: &DMatrix<f64>, y: &DVector<f64>, beta: &DVector<f64>) -> f64 {
     let n = y.len();
     let resid = y - x * beta;
     let rss = resid.norm_squared();
-    if n < 3 || rss <= 0.0 {
+    if n < 3 {
+        return f64::INFINITY;
+    }
+    if rss <= 0.0 {
         return 0.0;
     }
     let lag1: f64 = (1..n).map(|k| resid[k] * resid[k - 1]).sum();

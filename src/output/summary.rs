@@ -46,7 +46,7 @@ pub fn render(
         let pc = &p.counters;
         let _ = writeln!(
             s,
-            "  pipeline: {}; {} filter steps, {} gaps ({} while calibrating), {} filter resets, {} samples without a_z",
+            "  pipeline: {}; {} filter steps, {} gaps while estimating, {} while calibrating, {} filter resets, {} samples without a_z",
             p.stage_name(),
             pc.steps,
             pc.gaps,
