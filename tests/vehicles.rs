@@ -3,9 +3,9 @@
 mod common;
 
 use ahcmon::eval::run_scenario;
-use ahcmon::model::calibrate::{CalibrationSample, calibrate};
+use ahcmon::model::calibrate::{CalibrationSample, calibrate, calibrate_scaled};
 use ahcmon::scenario::resolve;
-use ahcmon::sim::vehicle::{ModelMismatch, VehicleSim, VehicleSimConfig};
+use ahcmon::sim::vehicle::{Gusts, ModelMismatch, VehicleSim, VehicleSimConfig};
 use ahcmon::telemetry::Profile;
 use std::process::Command;
 
@@ -343,4 +343,79 @@ fn calibration_leaves_out_the_steps_across_gaps() {
         joined > 0.05 && joined > 5.0 * marked,
         "joined across the holes: {joined} (left out: {marked})"
     );
+}
+
+/// The in-flight calibration (`calibrate_scaled`, what the live pipeline runs) in the gusts of
+/// the healthy-flight scenarios. The autopilot reacts to what the wind did, so commands and
+/// rates are correlated with the wind's next push, which a plain fit mistakes for weaker
+/// actuators and less damping (x0.59-0.81 against a true 0.9 on roll and pitch, damping 10-30 %
+/// low, measured on these flights before the wind was modelled). With the wind modelled as a
+/// first-order disturbance, roll and pitch over 60 s land at a mean error of about 1.5 % (every
+/// one within 10 %), the damping within a few %. Yaw, weakly damped, stays noisy (factor
+/// 0.84-0.94, damping 0.5-2 against 1.1 and 1.65): not asserted.
+#[test]
+fn in_flight_calibration_is_not_fooled_by_gusts() {
+    let (mut scale_err, mut damping_err, mut count) = (0.0, 0.0, 0.0);
+    for name in ["quad-x", "plane"] {
+        let profile = Profile::resolve(name).unwrap();
+        let base = profile.rate_params();
+        let mismatch = ModelMismatch {
+            damping: 1.1,
+            effectiveness: 0.9,
+        };
+        let truth = base.scaled(mismatch.damping, mismatch.effectiveness);
+        for seed in 1..=3 {
+            let cfg = VehicleSimConfig {
+                mismatch,
+                gusts: Some(Gusts {
+                    angular: [0.5, 0.5, 0.15],
+                    vertical: 0.3,
+                    tau_s: 1.0,
+                }),
+                ..VehicleSimConfig::calm(profile.clone(), 0.02, seed)
+            };
+            let mut sim = VehicleSim::new(cfg).unwrap();
+            let l = profile.actuators.len();
+            // 60 s after the first 10.
+            let samples: Vec<_> = (0..3500).map(|_| sim.step()).skip(500).collect();
+            // A simulator sample holds the outputs applied over its step and the rates at its
+            // end, which is what a calibration sample is.
+            let cal: Vec<CalibrationSample> = samples
+                .iter()
+                .map(|s| CalibrationSample {
+                    rates: [s.y[0], s.y[1], s.y[2]],
+                    u: &s.u[..l],
+                    az: None,
+                    follows_previous: true,
+                })
+                .collect();
+            let fit = calibrate_scaled(&cal, 0.02, &base).unwrap();
+            for axis in 0..2 {
+                assert!(
+                    fit.scaled[axis],
+                    "{name} seed {seed}: axis {axis} not excited"
+                );
+                let scale = (fit.scale[axis] - 0.9).abs() / 0.9;
+                let d = fit.params.damping[axis];
+                let damping = (d - truth.damping[axis]).abs() / truth.damping[axis];
+                println!(
+                    "{name} seed {seed} axis {axis}: x{:.3}, D {d:.3}",
+                    fit.scale[axis]
+                );
+                assert!(
+                    scale < 0.1,
+                    "{name} seed {seed} axis {axis}: x{}",
+                    fit.scale[axis]
+                );
+                assert!(damping < 0.15, "{name} seed {seed} axis {axis}: D {d}");
+                scale_err += scale;
+                damping_err += damping;
+                count += 1.0;
+            }
+        }
+    }
+    let (scale_err, damping_err) = (scale_err / count, damping_err / count);
+    println!("mean relative error: factor {scale_err:.4}, damping {damping_err:.4}");
+    assert!(scale_err < 0.03, "mean factor error {scale_err}");
+    assert!(damping_err < 0.05, "mean damping error {damping_err}");
 }
