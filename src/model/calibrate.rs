@@ -224,18 +224,19 @@ fn instrumental(
 /// (measured: gains x0.7-0.85 on a gusty quad). Quasi-differencing every row with the error's
 /// lag-1 correlation `phi` (`y_k - phi y_{k-1}` on `x_k - phi x_{k-1}`, Cochrane-Orcutt,
 /// iterated) leaves the wind's fresh part, which nothing before it knew. `consecutive[i]`:
-/// row i follows row i-1 by one step. Returns the fit on the original rows, and `phi`.
+/// row i follows row i-1 by one step. Returns the fit on the original rows and the
+/// coefficients' standard errors (of the quasi-differenced fit).
 fn instrumental_ar1(
     x: &DMatrix<f64>,
     z: &DMatrix<f64>,
     y: &DVector<f64>,
     consecutive: &[bool],
-) -> Option<(DVector<f64>, f64, f64, f64)> {
+) -> Option<WindFit> {
     let (mut beta, _, _) = instrumental(x, z, y)?;
+    let mut std_errors = instrumental_std_errors(x, z, y, &beta)?;
     // Rows i whose rows i-3..=i are consecutive steps.
     let run = |i: usize| (i.saturating_sub(2)..=i).all(|j| j >= 1 && consecutive[j]);
     let pairs: Vec<usize> = (3..y.len()).filter(|&i| run(i)).collect();
-    let mut phi = 0.0;
     if pairs.len() > 2 * x.ncols() {
         for iteration in 0..AR1_ITERATIONS {
             let r = y - x * &beta;
@@ -247,10 +248,10 @@ fn instrumental_ar1(
             // Only a disturbance that persists over two steps (lag-2 correlation of a tenth or
             // more) is modelled; white errors need no correction, and their lag ratio is noise.
             let power: f64 = pairs.iter().map(|&i| r[i] * r[i]).sum();
-            if iteration == 0 && den <= MIN_LAG2_CORRELATION * power {
+            if den <= 0.0 || (iteration == 0 && den <= MIN_LAG2_CORRELATION * power) {
                 break;
             }
-            phi = (num / den).clamp(0.0, 0.99);
+            let phi = (num / den).clamp(0.0, 0.99);
             let m = pairs.len();
             let mut xq = DMatrix::<f64>::zeros(m, x.ncols());
             let mut zq = DMatrix::<f64>::zeros(m, z.ncols());
@@ -267,6 +268,7 @@ fn instrumental_ar1(
                 yq[row] = y[i] - phi * y[i - 1];
             }
             beta = instrumental(&xq, &zq, &yq)?.0;
+            std_errors = instrumental_std_errors(&xq, &zq, &yq, &beta)?;
         }
     }
     let resid = y - x * &beta;
@@ -275,7 +277,35 @@ fn instrumental_ar1(
     let rss = resid.norm_squared();
     let r2 = if tss > 0.0 { 1.0 - rss / tss } else { 1.0 };
     let dof = (y.len() as f64 - x.ncols() as f64).max(1.0);
-    Some((beta, r2, (rss / dof).sqrt(), phi))
+    Some(WindFit {
+        beta,
+        r_squared: r2,
+        residual_std: (rss / dof).sqrt(),
+        std_errors,
+    })
+}
+
+/// What [`instrumental_ar1`] returns.
+struct WindFit {
+    beta: DVector<f64>,
+    r_squared: f64,
+    residual_std: f64,
+    std_errors: DVector<f64>,
+}
+
+/// Standard errors of an instrumented fit: `σ² (ZᵀX)⁻¹ ZᵀZ (XᵀZ)⁻¹` on the diagonal.
+fn instrumental_std_errors(
+    x: &DMatrix<f64>,
+    z: &DMatrix<f64>,
+    y: &DVector<f64>,
+    beta: &DVector<f64>,
+) -> Option<DVector<f64>> {
+    let resid = y - x * beta;
+    let dof = (y.len() as f64 - x.ncols() as f64).max(1.0);
+    let sigma2 = resid.norm_squared() / dof;
+    let zx_inv = (z.transpose() * x).try_inverse()?;
+    let cov = &zx_inv * (z.transpose() * z) * zx_inv.transpose() * sigma2;
+    Some(cov.diagonal().map(|v| v.max(0.0).sqrt()))
 }
 
 /// Cochrane-Orcutt iterations of [`instrumental_ar1`].
@@ -390,9 +420,29 @@ pub fn calibrate_scaled(
         };
         // The fit with the wind modelled; where it gives no physical answer (a slow axis, or
         // errors that are misfit rather than wind), the plain instrumented one.
-        let fitted = instrumental_ar1(&x, &z, &y, &consecutive)
-            .and_then(|(beta, r2, sd, _)| physical((beta, r2, sd)))
-            .or_else(|| instrumental(&x, &z, &y).and_then(physical));
+        // Quasi-differencing costs precision (most so on a weakly damped axis, where it nearly
+        // cancels the damping's own signal). So the wind-modelled fit replaces the plain one
+        // only where they differ by more than twice its standard error in the factor or the
+        // damping: there the plain fit's wind bias is evident, elsewhere it is the more
+        // precise of two consistent answers (a Hausman-style choice).
+        let plain = instrumental(&x, &z, &y).and_then(physical);
+        let wind = instrumental_ar1(&x, &z, &y, &consecutive).and_then(|w| {
+            let (a, se) = (w.beta[0], w.std_errors);
+            physical((w.beta, w.r_squared, w.residual_std)).map(|f| {
+                let hold = (1.0 - a) / f.0;
+                (f, se[1] / hold, se[0] / (a * dt))
+            })
+        });
+        let fitted = match (plain, wind) {
+            (Some(p), Some((w, se_factor, se_damping)))
+                if (w.1 - p.1).abs() <= 2.0 * se_factor
+                    && (w.0 - p.0).abs() <= 2.0 * se_damping =>
+            {
+                Some(p)
+            }
+            (_, Some((w, _, _))) => Some(w),
+            (p, None) => p,
+        };
         match fitted {
             Some((d, s, c, r2, sd)) => {
                 params.damping[axis] = d;
