@@ -209,13 +209,19 @@ fn instrumental(
         return None;
     }
     let beta = svd.solve(&(z.transpose() * y), 1e-14 * s_max).ok()?;
-    let resid = y - x * &beta;
+    let (r2, sd) = fit_quality(x, y, &beta);
+    Some((beta, r2, sd))
+}
+
+/// R² and residual standard deviation (per degree of freedom) of a linear fit.
+fn fit_quality(x: &DMatrix<f64>, y: &DVector<f64>, beta: &DVector<f64>) -> (f64, f64) {
+    let resid = y - x * beta;
     let mean = y.mean();
     let tss: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
     let rss = resid.norm_squared();
     let r2 = if tss > 0.0 { 1.0 - rss / tss } else { 1.0 };
     let dof = (y.len() as f64 - x.ncols() as f64).max(1.0);
-    Some((beta, r2, (rss / dof).sqrt()))
+    (r2, (rss / dof).sqrt())
 }
 
 /// [`instrumental`] with a first-order (AR(1)) disturbance taken out: wind is coloured, so the
@@ -278,16 +284,11 @@ fn instrumental_ar1(
             (beta, std_errors) = (b, se);
         }
     }
-    let resid = y - x * &beta;
-    let mean = y.mean();
-    let tss: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-    let rss = resid.norm_squared();
-    let r2 = if tss > 0.0 { 1.0 - rss / tss } else { 1.0 };
-    let dof = (y.len() as f64 - x.ncols() as f64).max(1.0);
+    let (r_squared, residual_std) = fit_quality(x, y, &beta);
     Some(WindFit {
         beta,
-        r_squared: r2,
-        residual_std: (rss / dof).sqrt(),
+        r_squared,
+        residual_std,
         std_errors,
     })
 }
@@ -335,13 +336,8 @@ fn least_squares(x: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, f6
         return None;
     }
     let beta = svd.solve(y, 1e-12 * s_max).ok()?;
-    let resid = y - x * &beta;
-    let n = y.len() as f64;
-    let mean = y.mean();
-    let tss: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-    let rss = resid.norm_squared();
-    let r2 = if tss > 0.0 { 1.0 - rss / tss } else { 1.0 };
-    Some((beta, r2, (rss / (n - x.ncols() as f64).max(1.0)).sqrt()))
+    let (r2, sd) = fit_quality(x, y, &beta);
+    Some((beta, r2, sd))
 }
 
 /// Which parts of a [`calibrate_scaled`] fit came from the data.
