@@ -135,3 +135,85 @@ fn ukf_equals_linear_kf_on_linear_model() {
     println!("UKF vs linear KF: max difference {worst:.3e}");
     assert!(worst <= 1e-9, "UKF and linear KF differ by {worst:e}");
 }
+
+/// The rate model as a model that does not declare itself affine: the UKF then runs its sigma
+/// points.
+#[derive(Clone)]
+struct SigmaPointsOnly(ahcmon::model::RateModel<11, 4>);
+
+impl Model<11, 4> for SigmaPointsOnly {
+    fn input_dim(&self) -> usize {
+        self.0.input_dim()
+    }
+    fn dt(&self) -> f64 {
+        self.0.dt()
+    }
+    fn f(&self, z: &SVector<f64, 11>, u: &[f64]) -> SVector<f64, 11> {
+        self.0.f(z, u)
+    }
+    fn jacobian(&self, z: &SVector<f64, 11>, u: &[f64]) -> SMatrix<f64, 11, 11> {
+        self.0.jacobian(z, u)
+    }
+    fn h_matrix(&self, u: &[f64]) -> SMatrix<f64, 4, 11> {
+        self.0.h_matrix(u)
+    }
+    fn h_offset(&self, u: &[f64]) -> SVector<f64, 4> {
+        self.0.h_offset(u)
+    }
+    fn bilinear_terms(&self) -> &[ahcmon::model::BilinearTerm] {
+        self.0.bilinear_terms()
+    }
+    fn ahc_start(&self) -> usize {
+        self.0.ahc_start()
+    }
+}
+
+/// For an affine model (every vehicle's rate model) the UKF skips its sigma points: the
+/// unscented transform of an affine map is exact. The closed form must give the sigma points'
+/// numbers, step by step, through a motor fault (quad X, 4 motors with a_z, n = 11).
+#[test]
+fn affine_closed_form_matches_sigma_points() {
+    use ahcmon::estimate::vehicle::FilterSetup;
+    use ahcmon::sim::fault::Fault;
+    use ahcmon::sim::vehicle::{VehicleSim, VehicleSimConfig};
+    use ahcmon::telemetry::Profile;
+    let profile = Profile::resolve("quad-x").unwrap();
+    let mut cfg = VehicleSimConfig::calm(profile.clone(), 0.02, 3);
+    cfg.faults = vec![Fault {
+        actuator: "motor2".into(),
+        t: 20.0,
+        until: None,
+        gamma: Some(0.7),
+        delta: None,
+        sine: None,
+        ramp: None,
+        stuck: None,
+    }];
+    let mut sim = VehicleSim::new(cfg).unwrap();
+    let s = FilterSetup::<11, 4>::from_profile(&profile, 0.02).unwrap();
+    assert!(s.model.is_affine());
+    let params = UkfParams {
+        innovation_clip_nis: 18.47,
+        ..UkfParams::default()
+    };
+    let (x0, p0, q, r) = (s.x0, s.kalman_p0, s.kalman_q, s.kalman_r);
+    let mut closed = Ukf::<_, 11, 4, 23>::new(s.model, params, x0, p0, q, r);
+    let mut sigma = Ukf::<_, 11, 4, 23>::new(SigmaPointsOnly(s.model), params, x0, p0, q, r);
+    let mut worst = 0.0f64;
+    for _ in 0..2000 {
+        let sample = sim.step();
+        let y = SVector::<f64, 4>::from_column_slice(&sample.y);
+        closed.try_step(&sample.u[..4], &y).unwrap();
+        sigma.try_step(&sample.u[..4], &y).unwrap();
+        worst = worst
+            .max((closed.x - sigma.x).amax())
+            .max((closed.p - sigma.p).amax() / sigma.p.amax());
+    }
+    // The fault moved the estimate: the comparison is not between two idle filters.
+    assert!(closed.x[4] < 0.85, "motor2 gain {:.3}", closed.x[4]);
+    println!("UKF closed form vs sigma points (n = 11): max difference {worst:.3e}");
+    assert!(
+        worst <= 1e-9,
+        "closed form and sigma points differ by {worst:e}"
+    );
+}

@@ -8,7 +8,7 @@
 //! of estimators.md §3.5 (see [`EsmfParams`]).
 
 use super::linalg::{
-    cholesky_jitter, identity_tail_start, sandwich_walk, sym_top_eigen, symmetrize,
+    SparseRows, cholesky_jitter, identity_tail_start, sandwich_walk, sym_top_eigen, symmetrize,
 };
 use super::{Estimator, EstimatorError, check_inputs};
 use crate::model::{BilinearTerm, Model};
@@ -165,8 +165,9 @@ pub fn shape_step<const N: usize, const M: usize>(
         st.pi[(i, i)] += st.q_hat[i] / beta;
     }
     // Paper's rho from the largest eigenvalues of the predicted output set and of R.
-    st.h_pi = h * st.pi;
-    let mut h_pi_h = st.h_pi * h.transpose();
+    let sh = SparseRows::new(h);
+    st.h_pi = sh.right_t(&st.pi).transpose(); // Π symmetric
+    let mut h_pi_h = sh.right_t(&st.h_pi);
     symmetrize(&mut h_pi_h);
     st.h_pi_h = h_pi_h;
     let (lam, vec) = sym_top_eigen(&h_pi_h);

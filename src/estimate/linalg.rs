@@ -99,7 +99,7 @@ pub fn sym_top_eigen<const M: usize>(a: &SMatrix<f64, M, M>) -> (f64, SVector<f6
 
 /// Up to this size nalgebra's unrolled dense products beat the structured loops below
 /// (measured: the paper model, n = 5).
-const SMALL_N: usize = 6;
+pub const SMALL_N: usize = 6;
 /// [`sandwich_walk`] handles up to this many mixing rows (the rates: 3) on the stack.
 const WALK_MAX_ROWS: usize = 4;
 
@@ -113,8 +113,13 @@ pub fn identity_tail_start<const N: usize>(a: &SMatrix<f64, N, N>) -> usize {
     k
 }
 
-/// `A X Aᵀ` when rows `k..N` of `A` are rows of the identity (the AHCs are random walks, so
-/// only the first `k` rows of the Jacobian mix): `2 k N²` products instead of `2 N³`.
+/// `A X Aᵀ` for a symmetric `X` when rows `k..N` of `A` are rows of the identity (the AHCs
+/// are random walks, so only the first `k` rows of the Jacobian mix). With `A = [A₁; 0 I]`
+/// the result is `X` outside its first `k` rows and columns, `A₁ X` in those rows (mirrored),
+/// and `A₁ X A₁ᵀ` in the corner: about `k N²` products instead of `2 N³`. Every caller passes
+/// a symmetric matrix (a shape, a covariance or a derivative of one); the result is exactly
+/// symmetric.
+#[allow(clippy::needless_range_loop)] // index loops mirror the block formulas
 pub fn sandwich_walk<const N: usize>(
     a: &SMatrix<f64, N, N>,
     x: &SMatrix<f64, N, N>,
@@ -128,28 +133,141 @@ pub fn sandwich_walk<const N: usize>(
     for (r, row) in rows.iter_mut().enumerate().take(k) {
         *row = a.row(r).transpose();
     }
-    // T = A X: rows from k on are X's own.
-    let mut y = *x;
+    // T = A₁ X, row r of it as column r of `t` (X symmetric: its column c is its row c).
+    let mut t = [SVector::<f64, N>::zeros(); WALK_MAX_ROWS];
     for c in 0..N {
         let xc = x.column(c);
-        for (r, row) in rows.iter().enumerate().take(k) {
-            y[(r, c)] = row.dot(&xc);
+        for r in 0..k {
+            t[r][c] = rows[r].dot(&xc);
         }
     }
-    // Y = T Aᵀ: columns from k on are T's own; the first k from T before they change.
-    let mut cols = [SVector::<f64, N>::zeros(); WALK_MAX_ROWS];
-    for (col, row) in cols.iter_mut().zip(rows.iter()).take(k) {
-        *col = y * row;
+    let mut out = *x;
+    for r in 0..k {
+        for c in k..N {
+            out[(r, c)] = t[r][c];
+            out[(c, r)] = t[r][c];
+        }
+        for s in 0..=r {
+            let v = t[r].dot(&rows[s]);
+            out[(r, s)] = v;
+            out[(s, r)] = v;
+        }
     }
-    for (c, col) in cols.iter().enumerate().take(k) {
-        y.set_column(c, col);
+    out
+}
+
+/// A measurement matrix by its nonzero entries per row. The gyro rows are unit rows and the
+/// `a_z` row touches only the AHCs, so a product with `H` costs a quarter of a dense one.
+#[derive(Debug, Clone, Copy)]
+pub struct SparseRows<const M: usize, const N: usize> {
+    index: [[usize; N]; M],
+    value: [[f64; N]; M],
+    len: [usize; M],
+}
+
+impl<const M: usize, const N: usize> SparseRows<M, N> {
+    pub fn new(h: &SMatrix<f64, M, N>) -> Self {
+        let mut s = Self {
+            index: [[0; N]; M],
+            value: [[0.0; N]; M],
+            len: [0; M],
+        };
+        for m in 0..M {
+            for c in 0..N {
+                let v = h[(m, c)];
+                if v != 0.0 {
+                    s.index[m][s.len[m]] = c;
+                    s.value[m][s.len[m]] = v;
+                    s.len[m] += 1;
+                }
+            }
+        }
+        s
     }
-    y
+
+    fn row(&self, m: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        (0..self.len[m]).map(move |t| (self.index[m][t], self.value[m][t]))
+    }
+
+    /// `X Hᵀ`: column m is a combination of X's columns (contiguous).
+    pub fn right_t<const R: usize>(&self, x: &SMatrix<f64, R, N>) -> SMatrix<f64, R, M> {
+        let mut out = SMatrix::<f64, R, M>::zeros();
+        for m in 0..M {
+            let mut col = SVector::<f64, R>::zeros();
+            for (c, v) in self.row(m) {
+                col.axpy(v, &x.column(c), 1.0);
+            }
+            out.set_column(m, &col);
+        }
+        out
+    }
+
+    /// `H X`.
+    pub fn left<const C: usize>(&self, x: &SMatrix<f64, N, C>) -> SMatrix<f64, M, C> {
+        let mut out = SMatrix::<f64, M, C>::zeros();
+        for j in 0..C {
+            for m in 0..M {
+                out[(m, j)] = self.row(m).map(|(c, v)| v * x[(c, j)]).sum();
+            }
+        }
+        out
+    }
+
+    /// `H x`.
+    pub fn apply(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
+        SVector::from_fn(|m, _| self.row(m).map(|(c, v)| v * x[c]).sum())
+    }
+}
+
+/// `G X Gᵀ` with `G = I - K H` and `X` symmetric, from `X Hᵀ` (sparse `H`) and two rank-M
+/// products: about half the work of the dense `(I - KH) X (I - KH)ᵀ`. Exactly symmetric.
+pub fn sandwich_gain<const N: usize, const M: usize>(
+    x: &SMatrix<f64, N, N>,
+    k: &SMatrix<f64, N, M>,
+    h: &SparseRows<M, N>,
+) -> SMatrix<f64, N, N> {
+    // Y = G X = X - K (X Hᵀ)ᵀ; then G X Gᵀ = Y - (Y Hᵀ) Kᵀ, built on the upper triangle.
+    let xh = h.right_t(x);
+    let y = x - k * xh.transpose();
+    let yh = h.right_t(&y);
+    let mut out = y;
+    for c in 0..N {
+        for r in 0..=c {
+            let v = y[(r, c)] - yh.row(r).dot(&k.row(c));
+            out[(r, c)] = v;
+            out[(c, r)] = v;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sparse_products_and_gain_sandwich_match_dense() {
+        let mut h = test_matrix::<4, 11>(0.53);
+        for r in 0..3 {
+            for c in 0..11 {
+                h[(r, c)] = if r == c { 1.0 } else { 0.0 };
+            }
+        }
+        for c in 0..3 {
+            h[(3, c)] = 0.0;
+        }
+        let sh = SparseRows::new(&h);
+        let b = test_matrix::<11, 11>(0.29);
+        let x = b * b.transpose();
+        let k = test_matrix::<11, 4>(0.71);
+        let v = test_matrix::<11, 1>(0.17);
+        assert!((sh.right_t(&x) - x * h.transpose()).amax() < 1e-12);
+        assert!((sh.left(&x) - h * x).amax() < 1e-12);
+        assert!((sh.apply(&v) - h * v).amax() < 1e-12);
+        let g = SMatrix::<f64, 11, 11>::identity() - k * h;
+        let dense = g * x * g.transpose();
+        assert!((sandwich_gain(&x, &k, &sh) - dense).amax() < 1e-10 * dense.amax());
+    }
 
     #[test]
     fn top_eigen_of_known_matrix() {

@@ -2,6 +2,7 @@
 //! covariance, the recursive sensitivity of the predicted covariance to each process-noise
 //! entry, and the step-size schedule with restart and floor.
 
+use super::linalg::{SMALL_N, SparseRows, identity_tail_start, sandwich_gain, sandwich_walk};
 use nalgebra::{SMatrix, SVector};
 
 /// Largest window the ring buffer holds (the window length itself is a runtime parameter).
@@ -121,6 +122,57 @@ impl<const M: usize> InnovationWindow<M> {
     }
 }
 
+/// A linear map `X ↦ A X Aᵀ` on symmetric matrices (the sensitivity recursion's transition).
+pub trait Sandwich<const N: usize> {
+    fn sandwich(&self, x: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N>;
+}
+
+impl<const N: usize> Sandwich<N> for SMatrix<f64, N, N> {
+    fn sandwich(&self, x: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+        self * x * self.transpose()
+    }
+}
+
+/// `A = F (I - K H)` kept in its factors: `F` is the identity below its rate rows and `H` is
+/// sparse, so `A X Aᵀ = F (G X Gᵀ) Fᵀ` costs about 60 % of the dense product at n = 11.
+#[derive(Debug, Clone, Copy)]
+pub struct GainTransition<const N: usize, const M: usize> {
+    f: SMatrix<f64, N, N>,
+    walk_from: usize,
+    k: SMatrix<f64, N, M>,
+    h: SparseRows<M, N>,
+    /// `A` itself for small N, where nalgebra's unrolled dense product is faster.
+    dense: Option<SMatrix<f64, N, N>>,
+}
+
+impl<const N: usize, const M: usize> GainTransition<N, M> {
+    pub fn new(f: &SMatrix<f64, N, N>, k: &SMatrix<f64, N, M>, h: &SMatrix<f64, M, N>) -> Self {
+        let dense = (N <= SMALL_N).then(|| f * (SMatrix::<f64, N, N>::identity() - k * h));
+        Self {
+            f: *f,
+            walk_from: identity_tail_start(f),
+            k: *k,
+            h: SparseRows::new(h),
+            dense,
+        }
+    }
+
+    /// `A` as a dense matrix.
+    pub fn matrix(&self) -> SMatrix<f64, N, N> {
+        let h = self.h.left(&SMatrix::<f64, N, N>::identity());
+        self.f * (SMatrix::<f64, N, N>::identity() - self.k * h)
+    }
+}
+
+impl<const N: usize, const M: usize> Sandwich<N> for GainTransition<N, M> {
+    fn sandwich(&self, x: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+        match &self.dense {
+            Some(a) => a * x * a.transpose(),
+            None => sandwich_walk(&self.f, &sandwich_gain(x, &self.k, &self.h), self.walk_from),
+        }
+    }
+}
+
 /// `M_i,k = ∂P⁻_k/∂q_i`, propagated as `M_i,k = λ A_k M_i,k-1 A_kᵀ + E_ii` with
 /// `A_k = F_k (I - K_{k-1} H)` (gains held fixed: first-order exact at the optimal gain).
 /// The one-step version (`M_i = E_ii`) has a zero gradient for every AHC entry, because the
@@ -144,14 +196,14 @@ impl<const N: usize> Sensitivity<N> {
         }
     }
 
-    pub fn propagate(&mut self, a: &SMatrix<f64, N, N>, forgetting: f64) {
+    pub fn propagate(&mut self, a: &impl Sandwich<N>, forgetting: f64) {
         self.propagate_masked(a, forgetting, &[false; N]);
     }
 
     /// [`Sensitivity::propagate`] for the entries not in `skip` (theirs stay as they are).
-    pub fn propagate_masked(&mut self, a: &SMatrix<f64, N, N>, forgetting: f64, skip: &[bool; N]) {
+    pub fn propagate_masked(&mut self, a: &impl Sandwich<N>, forgetting: f64, skip: &[bool; N]) {
         for (i, m) in self.m.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
-            let mut next = (a * *m * a.transpose()) * forgetting;
+            let mut next = a.sandwich(m) * forgetting;
             next[(i, i)] += 1.0;
             *m = next;
         }
@@ -177,9 +229,10 @@ impl<const N: usize> Sensitivity<N> {
         h: &SMatrix<f64, M, N>,
         skip: &[bool; N],
     ) -> [SMatrix<f64, M, M>; N] {
+        let sh = SparseRows::new(h);
         let mut out = [SMatrix::<f64, M, M>::zeros(); N];
         for (i, o) in out.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
-            *o = h * self.m[i] * h.transpose();
+            *o = sh.left(&sh.right_t(&self.m[i]));
         }
         out
     }
@@ -280,6 +333,32 @@ pub fn log_step(q: f64, grad: f64, eta: f64, loss: f64, q0: f64, p: &AdaptationP
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn factored_transition_matches_the_dense_product() {
+        // F: identity below three mixing rows; H: three unit rows and one on the AHCs.
+        let mut f = SMatrix::<f64, 11, 11>::identity();
+        let mut h = SMatrix::<f64, 4, 11>::zeros();
+        for c in 0..11 {
+            for r in 0..3 {
+                f[(r, c)] = ((r * 5 + c * 3) as f64 * 0.37).sin();
+            }
+            if c >= 3 {
+                h[(3, c)] = (c as f64 * 0.7).cos();
+            }
+        }
+        for r in 0..3 {
+            h[(r, r)] = 1.0;
+        }
+        let k = SMatrix::<f64, 11, 4>::from_fn(|i, j| ((i + 2 * j) as f64 * 0.41).sin() * 0.3);
+        let b = SMatrix::<f64, 11, 11>::from_fn(|i, j| ((i * 7 + j) as f64 * 0.23).cos());
+        let x = b * b.transpose();
+        let t = GainTransition::new(&f, &k, &h);
+        let a = f * (SMatrix::<f64, 11, 11>::identity() - k * h);
+        assert!((t.matrix() - a).amax() < 1e-12);
+        let dense = a * x * a.transpose();
+        assert!((t.sandwich(&x) - dense).amax() < 1e-10 * dense.amax());
+    }
 
     #[test]
     fn window_covariance_matches_direct_mean() {

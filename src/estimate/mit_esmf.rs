@@ -73,7 +73,8 @@ impl<const N: usize> ShapeSensitivity<N> {
         let tr_p = st.p_bar.trace() * delta;
         // Products every i reuses: H Π, H Π Hᵀ, H AP_{k-1}Aᵀ.
         let (h_pi, h_pi_h) = (st.h_pi, st.h_pi_h);
-        let h_apa = h * st.apa;
+        let sh = super::linalg::SparseRows::new(h);
+        let h_apa = sh.right_t(&st.apa).transpose(); // symmetric
         let k_t = st.gain.transpose();
         for i in (0..N).filter(|&i| !self.skip[i]) {
             let dp_prev = &self.dp[i];
@@ -117,13 +118,13 @@ impl<const N: usize> ShapeSensitivity<N> {
             let c_a = forgetting / (1.0 - beta);
             let c_apa = dbeta / (1.0 - beta).powi(2);
             let d_diag = dq_hat / beta - st.q_hat * (dbeta / (beta * beta));
-            let mut h_dpi = h * a_dp_a * c_a + h_apa * c_apa;
+            let mut h_dpi = sh.right_t(&a_dp_a).transpose() * c_a + h_apa * c_apa;
             for j in 0..N {
                 for m in 0..M {
                     h_dpi[(m, j)] += h[(m, j)] * d_diag[j];
                 }
             }
-            let h_dpi_h = h_dpi * h.transpose();
+            let h_dpi_h = sh.right_t(&h_dpi);
             // rho through the top eigenvalue of H Π Hᵀ (simple eigenvalue assumed).
             let dlam = st.top_vec.dot(&(h_dpi_h * st.top_vec));
             let drho = if lam_sqrt > 0.0 {
@@ -141,8 +142,9 @@ impl<const N: usize> ShapeSensitivity<N> {
             // dΠ' - K(H dΠ') - (K(H dΠ'))ᵀ + K(H dΠ' Hᵀ)Kᵀ - K R Kᵀ dρ/ρ²; then
             // dP = dδ P̄ + δ dP̄, assembled in one pass over the upper triangle and mirrored
             // (exactly symmetric).
-            let k_hx = st.gain * h_dpip;
-            let kck = st.gain * (h_dpip_h * k_t);
+            // -K X - (K X)ᵀ + K C Kᵀ (X = H dΠ', C = H dΠ' Hᵀ) entry by entry on the upper
+            // triangle: -K_r·(X - C Kᵀ)_c - K_c·X_r, two length-M dot products.
+            let z = h_dpip - h_dpip_h * k_t;
             let c_krk = drho / (rho * rho);
             let (ca, capa) = (c_a * c_pi, c_apa * c_pi);
             let dp = &mut self.dp[i];
@@ -154,8 +156,9 @@ impl<const N: usize> ShapeSensitivity<N> {
                     if rr == c {
                         dpi_prime += c_pi * d_diag[c];
                     }
-                    let dp_bar = dpi_prime - k_hx[(rr, c)] - k_hx[(c, rr)] + kck[(rr, c)]
-                        - c_krk * krk[(rr, c)];
+                    let gain_terms =
+                        k_t.column(rr).dot(&z.column(c)) + k_t.column(c).dot(&h_dpip.column(rr));
+                    let dp_bar = dpi_prime - gain_terms - c_krk * krk[(rr, c)];
                     let v = ddelta * st.p_bar[(rr, c)] + delta * dp_bar;
                     dp[(rr, c)] = v;
                     dp[(c, rr)] = v;

@@ -11,8 +11,10 @@
 //! (μ: the windowed innovation mean) and the rate entries `tr[(Ĉ - μμᵀ - (S - S_ahc))²]`.
 //! A noise step moves the spread, a fault the mean. Each gradient is still `-2 tr[D H M_i Hᵀ]`.
 
+use super::linalg::SparseRows;
 use super::mit::{
-    AdaptationParams, InnovationWindow, Sensitivity, StepSchedule, gn_step, gradient_from,
+    AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
+    gn_step, gradient_from,
 };
 use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
 use crate::model::Model;
@@ -65,9 +67,11 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     }
 
     /// `A_k = F_k (I - K_{k-1} H)` with F at the previous estimate.
-    pub(crate) fn sensitivity_transition(ukf: &Ukf<Mo, N, M, S>, u: &[f64]) -> SMatrix<f64, N, N> {
-        let f = ukf.model.jacobian(&ukf.x, u);
-        f * (SMatrix::<f64, N, N>::identity() - ukf.gain * ukf.h)
+    pub(crate) fn sensitivity_transition(
+        ukf: &Ukf<Mo, N, M, S>,
+        u: &[f64],
+    ) -> GainTransition<N, M> {
+        GainTransition::new(&ukf.model.jacobian(&ukf.x, u), &ukf.gain, &ukf.h)
     }
 
     pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
@@ -79,16 +83,16 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.sensitivity
             .propagate_masked(&a, self.adapt.forgetting, &self.fixed);
         let ahc = self.ukf.model.ahc_start();
-        let mut next = (a * self.fixed_sum * a.transpose()) * self.adapt.forgetting;
+        let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
         for i in (ahc..N).filter(|&i| self.fixed[i]) {
             next[(i, i)] += self.ukf.process_noise[i];
         }
         self.fixed_sum = next;
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
-        let h = self.ukf.h;
-        let hmh = self.sensitivity.projected(&h, &self.fixed);
-        let mut s_ahc = h * self.fixed_sum * h.transpose();
+        let h = SparseRows::new(&self.ukf.h);
+        let hmh = self.sensitivity.projected(&self.ukf.h, &self.fixed);
+        let mut s_ahc = h.left(&h.right_t(&self.fixed_sum));
         for i in (ahc..N).filter(|&i| !self.fixed[i]) {
             s_ahc += hmh[i] * self.ukf.process_noise[i];
         }

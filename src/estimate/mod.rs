@@ -13,7 +13,9 @@ pub mod vehicle;
 
 pub use esmf::{Esmf, EsmfOutcome, EsmfParams, ShapeStep, remainder_box, scale_block, shape_step};
 pub use kf_ukf::{KfUkf, SlaveKfParams};
-pub use mit::{AdaptationParams, InnovationWindow, Sensitivity, StepSchedule};
+pub use mit::{
+    AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
+};
 pub use mit_esmf::{MitEsmf, ShapeSensitivity};
 pub use mit_ukf::MitUkf;
 pub use ukf::{Ukf, UkfParams};

@@ -1,7 +1,9 @@
 //! Unscented Kalman filter with scaled sigma points (Van der Merwe; filterpy's
 //! `MerweScaledSigmaPoints` ordering, so the golden test can compare step by step).
 
-use super::linalg::{cholesky_jitter, symmetrize};
+use super::linalg::{
+    SparseRows, cholesky_jitter, identity_tail_start, sandwich_gain, sandwich_walk, symmetrize,
+};
 use super::{Estimator, EstimatorError, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
@@ -127,11 +129,32 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         Ok(())
     }
 
-    /// Time update, then redraw the sigma points from the prediction (so Q reaches S).
+    /// Time update, then redraw the sigma points from the prediction (so Q reaches S). For an
+    /// affine model the unscented transform is exact and the closed form is used instead
+    /// (`F P Fᵀ + Q`; the update then uses `P Hᵀ` and `H P Hᵀ + R`): the same numbers, which
+    /// `affine_closed_form_matches_sigma_points` checks.
     pub fn predict(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
-        Self::draw_sigmas(&self.x, &self.p, self.sqrt_c, &mut self.sigmas, "predict")?;
         self.h = self.model.h_matrix(u);
         self.h_offset = self.model.h_offset(u);
+        if self.model.is_affine() {
+            let f = self.model.jacobian(&self.x, u);
+            let x = self.model.f(&self.x, u);
+            let mut p = sandwich_walk(&f, &self.p, identity_tail_start(&f));
+            for i in 0..N {
+                p[(i, i)] += self.process_noise[i];
+            }
+            symmetrize(&mut p);
+            // What the sigma points' Cholesky factor would have refused.
+            if !(0..N).all(|i| p[(i, i)] > 0.0 && p[(i, i)].is_finite()) {
+                return Err(EstimatorError::NotPositiveDefinite { stage: "predict" });
+            }
+            self.x_prior = x;
+            self.p_prior = p;
+            self.x = x;
+            self.p = p;
+            return Ok(());
+        }
+        Self::draw_sigmas(&self.x, &self.p, self.sqrt_c, &mut self.sigmas, "predict")?;
         let mut x = SVector::<f64, N>::zeros();
         for i in 0..S {
             self.sigmas_f[i] = self.model.f(&self.sigmas[i], u);
@@ -150,12 +173,23 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         Self::draw_sigmas(&self.x, &self.p, self.sqrt_c, &mut self.sigmas, "redraw")
     }
 
-    /// Measurement update from the redrawn sigma points; Joseph form (h is linear).
-    pub fn update(&mut self, y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+    /// Predicted measurement, innovation covariance `S` and cross-covariance `Pxy`.
+    fn predicted_measurement(
+        &self,
+        sh: &SparseRows<M, N>,
+    ) -> (SVector<f64, M>, SMatrix<f64, M, M>, SMatrix<f64, N, M>) {
+        if self.model.is_affine() {
+            let pxy = sh.right_t(&self.p);
+            return (
+                sh.apply(&self.x) + self.h_offset,
+                sh.left(&pxy) + self.r,
+                pxy,
+            );
+        }
         let mut y_pred = SVector::<f64, M>::zeros();
         let mut ys = [SVector::<f64, M>::zeros(); S];
         for ((yi, sigma), wm) in ys.iter_mut().zip(&self.sigmas).zip(&self.wm) {
-            *yi = self.h * sigma + self.h_offset;
+            *yi = sh.apply(sigma) + self.h_offset;
             y_pred += *yi * *wm;
         }
         let mut s = self.r;
@@ -166,6 +200,13 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
             s.ger(*wc, &dy, &dy, 1.0);
             pxy.ger(*wc, &dx, &dy, 1.0);
         }
+        (y_pred, s, pxy)
+    }
+
+    /// Measurement update from the redrawn sigma points; Joseph form (h is linear).
+    pub fn update(&mut self, y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        let sh = SparseRows::new(&self.h);
+        let (y_pred, mut s, pxy) = self.predicted_measurement(&sh);
         symmetrize(&mut s);
         let s_chol = cholesky_jitter(&s, "innovation covariance")?;
         // K = Pxy S⁻¹  <=>  Kᵀ = S⁻¹ Pxyᵀ (S symmetric).
@@ -178,8 +219,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
             1.0
         };
         self.x += gain * e * scale;
-        let i_kh = SMatrix::<f64, N, N>::identity() - gain * self.h;
-        let mut p = i_kh * self.p * i_kh.transpose() + gain * self.r * gain.transpose();
+        // Joseph form (I - KH) P (I - KH)ᵀ + K R Kᵀ.
+        let mut p = sandwich_gain(&self.p, &gain, &sh) + gain * self.r * gain.transpose();
         symmetrize(&mut p);
         for i in self.model.ahc_start()..N {
             if p[(i, i)] < self.params.ahc_variance_floor {

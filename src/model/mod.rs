@@ -48,6 +48,13 @@ pub trait Model<const N: usize, const M: usize> {
     fn bilinear_terms(&self) -> &[BilinearTerm];
     /// Index of the first AHC in the state; AHCs occupy `ahc_start()..N`.
     fn ahc_start(&self) -> usize;
+    /// True when `f` is affine in `z` for a known `u` (`f(z, u) = F(u) z + b(u)`, no bilinear
+    /// terms, `jacobian` independent of `z`). The unscented transform of an affine map is
+    /// exact, so the UKF then propagates mean and covariance in closed form: the same numbers
+    /// as its sigma points give, at a fraction of the cost.
+    fn is_affine(&self) -> bool {
+        false
+    }
     /// Measurement function.
     fn h(&self, z: &SVector<f64, N>, u: &[f64]) -> SVector<f64, M> {
         self.h_matrix(u) * z + self.h_offset(u)

@@ -343,6 +343,10 @@ impl<const N: usize, const M: usize> Model<N, M> for RateModel<N, M> {
     fn ahc_start(&self) -> usize {
         3
     }
+
+    fn is_affine(&self) -> bool {
+        true
+    }
 }
 
 #[cfg(test)]
