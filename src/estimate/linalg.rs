@@ -133,12 +133,13 @@ pub fn sandwich_walk<const N: usize>(
     for (r, row) in rows.iter_mut().enumerate().take(k) {
         *row = a.row(r).transpose();
     }
-    // T = A₁ X, row r of it as column r of `t` (X symmetric: its column c is its row c).
+    // T = A₁ X, row r of it as column r of `t`: (A₁ X)ᵀ = X A₁ᵀ (X symmetric), a sum of X's
+    // columns (contiguous axpys, no horizontal sums).
     let mut t = [SVector::<f64, N>::zeros(); WALK_MAX_ROWS];
     for c in 0..N {
         let xc = x.column(c);
         for r in 0..k {
-            t[r][c] = rows[r].dot(&xc);
+            t[r].axpy(rows[r][c], &xc, 1.0);
         }
     }
     let mut out = *x;
@@ -231,13 +232,8 @@ pub fn sandwich_gain<const N: usize, const M: usize>(
     let y = x - k * xh.transpose();
     let yh = h.right_t(&y);
     let mut out = y;
-    for c in 0..N {
-        for r in 0..=c {
-            let v = y[(r, c)] - yh.row(r).dot(&k.row(c));
-            out[(r, c)] = v;
-            out[(c, r)] = v;
-        }
-    }
+    out.gemm(-1.0, &yh, &k.transpose(), 1.0);
+    symmetrize(&mut out);
     out
 }
 
