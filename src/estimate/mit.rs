@@ -232,7 +232,12 @@ impl<const N: usize> Sensitivity<N> {
         let sh = SparseRows::new(h);
         let mut out = [SMatrix::<f64, M, M>::zeros(); N];
         for (i, o) in out.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
-            *o = sh.left(&sh.right_t(&self.m[i]));
+            // Small models: nalgebra's unrolled dense product is faster than the sparse one.
+            *o = if N <= SMALL_N {
+                h * self.m[i] * h.transpose()
+            } else {
+                sh.left(&sh.right_t(&self.m[i]))
+            };
         }
         out
     }
