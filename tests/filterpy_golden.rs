@@ -217,3 +217,41 @@ fn affine_closed_form_matches_sigma_points() {
         "closed form and sigma points differ by {worst:e}"
     );
 }
+
+/// The closed form refuses what the sigma points refused: an indefinite covariance is a typed
+/// error and the step leaves the filter as it was.
+#[test]
+fn affine_closed_form_rejects_an_indefinite_covariance() {
+    use ahcmon::estimate::EstimatorError;
+    use ahcmon::estimate::vehicle::FilterSetup;
+    use ahcmon::telemetry::Profile;
+    let profile = Profile::resolve("quad-x").unwrap();
+    let s = FilterSetup::<11, 4>::from_profile(&profile, 0.02).unwrap();
+    let mut f = Ukf::<_, 11, 4, 23>::new(
+        s.model,
+        UkfParams::default(),
+        s.x0,
+        s.kalman_p0,
+        s.kalman_q,
+        s.kalman_r,
+    );
+    let u = [0.5; 4];
+    let y = SVector::<f64, 4>::new(0.0, 0.0, 0.0, -9.8);
+    f.try_step(&u, &y).unwrap();
+    // A correlation of 3 between two motors' gains (random walks: the prediction keeps it):
+    // no covariance has it.
+    let c = 3.0 * (f.p[(3, 3)] * f.p[(4, 4)]).sqrt();
+    f.p[(3, 4)] = c;
+    f.p[(4, 3)] = c;
+    let (x, p) = (f.x, f.p);
+    let r = f.try_step(&u, &y);
+    assert!(
+        matches!(r, Err(EstimatorError::NotPositiveDefinite { .. })),
+        "{r:?}"
+    );
+    assert_eq!(
+        (f.x, f.p),
+        (x, p),
+        "a refused step must leave the filter as it was"
+    );
+}

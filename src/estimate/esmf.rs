@@ -330,6 +330,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         r: SMatrix<f64, M, M>,
     ) -> Self {
         let (lam, _) = sym_top_eigen(&r);
+        // The structured products (`sandwich_walk`, `sandwich_gain`) assume a symmetric shape.
+        let mut p0 = p0;
+        symmetrize(&mut p0);
         Self {
             model,
             params,

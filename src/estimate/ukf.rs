@@ -79,6 +79,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         r: SMatrix<f64, M, M>,
     ) -> Self {
         assert!(S == 2 * N + 1, "Ukf: S must be 2N+1 (got N={N}, S={S})");
+        // The structured products (`sandwich_walk`, `sandwich_gain`) assume a symmetric shape.
+        let mut p0 = p0;
+        symmetrize(&mut p0);
         let u0 = [0.0; crate::model::MAX_INPUTS];
         let u0 = &u0[..model.input_dim().min(crate::model::MAX_INPUTS)];
         let (h, h_offset) = (model.h_matrix(u0), model.h_offset(u0));
@@ -144,10 +147,12 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
                 p[(i, i)] += self.process_noise[i];
             }
             symmetrize(&mut p);
-            // What the sigma points' Cholesky factor would have refused.
-            if !(0..N).all(|i| p[(i, i)] > 0.0 && p[(i, i)].is_finite()) {
-                return Err(EstimatorError::NotPositiveDefinite { stage: "predict" });
+            // What the sigma points would have refused: a non-finite state, and (through
+            // their Cholesky factor) a covariance that is not positive definite or not finite.
+            if !x.iter().all(|v| v.is_finite()) {
+                return Err(EstimatorError::NonFinite { what: "UKF state" });
             }
+            cholesky_jitter(&p, "predict")?;
             self.x_prior = x;
             self.p_prior = p;
             self.x = x;
