@@ -235,18 +235,25 @@ fn affine_closed_form_rejects_an_indefinite_covariance() {
         s.kalman_q,
         s.kalman_r,
     );
-    let u = [0.5; 4];
+    // Zero commands: the gains reach neither the rates nor a_z, so the prediction keeps the
+    // gain block as it is, its diagonal stays positive, and only a factorisation (not a look
+    // at the variances) sees what is wrong.
+    let u = [0.0; 4];
     let y = SVector::<f64, 4>::new(0.0, 0.0, 0.0, -9.8);
     f.try_step(&u, &y).unwrap();
-    // A correlation of 3 between two motors' gains (random walks: the prediction keeps it):
-    // no covariance has it.
+    // A correlation of 3 between two motors' gains: no covariance has it.
     let c = 3.0 * (f.p[(3, 3)] * f.p[(4, 4)]).sqrt();
     f.p[(3, 4)] = c;
     f.p[(4, 3)] = c;
     let (x, p) = (f.x, f.p);
     let r = f.try_step(&u, &y);
+    // Refused by the prediction itself, as the sigma points' Cholesky factor refused it (not
+    // only later, by the innovation covariance).
     assert!(
-        matches!(r, Err(EstimatorError::NotPositiveDefinite { .. })),
+        matches!(
+            r,
+            Err(EstimatorError::NotPositiveDefinite { stage: "predict" })
+        ),
         "{r:?}"
     );
     assert_eq!(

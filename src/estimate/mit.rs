@@ -229,17 +229,34 @@ impl<const N: usize> Sensitivity<N> {
         h: &SMatrix<f64, M, N>,
         skip: &[bool; N],
     ) -> [SMatrix<f64, M, M>; N] {
-        let sh = SparseRows::new(h);
+        self.projected_with(h, &SparseRows::new(h), skip)
+    }
+
+    /// [`Sensitivity::projected`] with `H`'s nonzeros already gathered.
+    pub fn projected_with<const M: usize>(
+        &self,
+        h: &SMatrix<f64, M, N>,
+        sh: &SparseRows<M, N>,
+        skip: &[bool; N],
+    ) -> [SMatrix<f64, M, M>; N] {
         let mut out = [SMatrix::<f64, M, M>::zeros(); N];
         for (i, o) in out.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
-            // Small models: nalgebra's unrolled dense product is faster than the sparse one.
-            *o = if N <= SMALL_N {
-                h * self.m[i] * h.transpose()
-            } else {
-                sh.left(&sh.right_t(&self.m[i]))
-            };
+            *o = h_x_ht(h, sh, &self.m[i]);
         }
         out
+    }
+}
+
+/// `H X Hᵀ`: sparse, except for small models, where nalgebra's unrolled dense product is faster.
+pub fn h_x_ht<const M: usize, const N: usize>(
+    h: &SMatrix<f64, M, N>,
+    sh: &SparseRows<M, N>,
+    x: &SMatrix<f64, N, N>,
+) -> SMatrix<f64, M, M> {
+    if N <= SMALL_N {
+        h * x * h.transpose()
+    } else {
+        sh.left(&sh.right_t(x))
     }
 }
 

@@ -14,7 +14,7 @@
 use super::linalg::SparseRows;
 use super::mit::{
     AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
-    gn_step, gradient_from,
+    gn_step, gradient_from, h_x_ht,
 };
 use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
 use crate::model::Model;
@@ -90,9 +90,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.fixed_sum = next;
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
-        let h = SparseRows::new(&self.ukf.h);
-        let hmh = self.sensitivity.projected(&self.ukf.h, &self.fixed);
-        let mut s_ahc = h.left(&h.right_t(&self.fixed_sum));
+        let (h, sh) = (&self.ukf.h, SparseRows::new(&self.ukf.h));
+        let hmh = self.sensitivity.projected_with(h, &sh, &self.fixed);
+        let mut s_ahc = h_x_ht(h, &sh, &self.fixed_sum);
         for i in (ahc..N).filter(|&i| !self.fixed[i]) {
             s_ahc += hmh[i] * self.ukf.process_noise[i];
         }
