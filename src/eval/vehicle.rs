@@ -6,6 +6,7 @@ use crate::diagnose::vehicle::{Decision, Diagnoser, DiagnosisParams, Event};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES, build};
 use crate::model::MAX_ACTUATORS;
 use crate::scenario::NamedScenario;
+use crate::sim::fault::Fault;
 use crate::sim::vehicle::{ModelMismatch, VehicleSample, VehicleSim, VehicleSimConfig};
 use crate::telemetry::Profile;
 use std::time::Instant;
@@ -28,6 +29,20 @@ pub trait StepSink {
     fn threshold(&self) -> Option<f64> {
         None
     }
+}
+
+/// True when `d` names an actuator that a scripted fault other than the scored one (`target`)
+/// has made faulty at `d.t`: such a decision is right, not false.
+fn later_fault_named(faults: &[Fault], target: Option<&str>, d: &Decision) -> bool {
+    let Some(name) = d.actuator.as_deref() else {
+        return false;
+    };
+    faults.iter().any(|f| {
+        f.actuator == name
+            && Some(name) != target
+            && d.t >= f.t
+            && f.until.is_none_or(|end| d.t <= end)
+    })
 }
 
 /// A sink that keeps nothing.
@@ -210,10 +225,15 @@ pub fn run_vehicle_scenario(
             let is_right = |d: &Decision| {
                 target.is_some_and(|j| d.actuator.as_deref() == Some(names[j].as_str()))
             };
+            // A scenario may script further faults after the first (the demo's tail bias): a
+            // decision naming one of those actuators while it is faulty is not false either.
+            let target_name = target.map(|j| names[j].as_str());
+            let truly_faulted = |d: &Decision| later_fault_named(&scn.faults, target_name, d);
             let false_decisions = mine
                 .iter()
                 .filter(|d| d.event == Event::Fault || !is_right(d))
                 .filter(|d| !is_right(d) || onset.is_none_or(|t0| d.t < t0))
+                .filter(|d| !truly_faulted(d))
                 .count() as u32;
             let first_right = mine
                 .iter()
@@ -276,4 +296,45 @@ pub fn run_vehicle_scenario(
         filters: runs,
         final_speed: f64::NAN,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fault(actuator: &str, t: f64, until: Option<f64>) -> Fault {
+        let until = until.map(|e| format!("\nuntil = {e}")).unwrap_or_default();
+        toml::from_str(&format!(
+            "actuator = \"{actuator}\"\nt = {t}\ngamma = 0.5{until}"
+        ))
+        .expect("fault")
+    }
+
+    fn decision(t: f64, actuator: &str) -> Decision {
+        let mut d = Decision::monitor(t, 1, Event::Fault, "");
+        d.actuator = Some(actuator.to_string());
+        d
+    }
+
+    #[test]
+    fn a_decision_on_a_later_scripted_fault_is_not_false() {
+        let faults = [fault("swash2", 32.0, None), fault("tail", 45.0, Some(50.0))];
+        let target = Some("swash2");
+        // The tail while it is faulty: right.
+        assert!(later_fault_named(&faults, target, &decision(45.2, "tail")));
+        // Before its onset, after its end, or another actuator: still false.
+        assert!(!later_fault_named(&faults, target, &decision(44.0, "tail")));
+        assert!(!later_fault_named(&faults, target, &decision(51.0, "tail")));
+        assert!(!later_fault_named(
+            &faults,
+            target,
+            &decision(46.0, "swash1")
+        ));
+        // The scored actuator itself is judged by the isolation rules, not here.
+        assert!(!later_fault_named(
+            &faults,
+            target,
+            &decision(40.0, "swash2")
+        ));
+    }
 }
