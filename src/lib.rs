@@ -14,3 +14,4 @@ pub mod pipeline;
 pub mod scenario;
 pub mod sim;
 pub mod telemetry;
+pub mod toml_file;

@@ -286,11 +286,18 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let msg = e
-                .chain()
-                .map(|c| c.to_string())
-                .collect::<Vec<_>>()
-                .join(": ");
+            // The chain, each link once: an error that already says its source (`{path}:
+            // {source}`) is not followed by the source again.
+            let mut msg = String::new();
+            for link in e.chain().map(|c| c.to_string()) {
+                if msg.ends_with(&link) {
+                    continue;
+                }
+                if !msg.is_empty() {
+                    msg.push_str(": ");
+                }
+                msg.push_str(&link);
+            }
             eprintln!("ahcmon: error: {}", msg.replace('\n', " "));
             ExitCode::from(if is_input_error(&e) { 2 } else { 1 })
         }

@@ -6,9 +6,8 @@ use crate::sim::noise::NoiseSchedule;
 use crate::sim::paper::{ACTUATORS, Dither};
 use crate::sim::vehicle::{AttitudeDither, Gusts, Manoeuvre, ModelMismatch};
 use crate::telemetry::Profile;
+use crate::toml_file::{self, TomlFileError};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
-use thiserror::Error;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -93,24 +92,8 @@ fn default_speed() -> f64 {
     10.0
 }
 
-#[derive(Debug, Error)]
-pub enum ScenarioError {
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
-    #[error("{path}:{line}: {message}")]
-    Parse {
-        path: String,
-        line: usize,
-        message: String,
-    },
-    #[error("{path}: {message}")]
-    Invalid { path: String, message: String },
-    #[error("no scenario file or built-in scenario named `{name}` (built-in: {builtin})")]
-    NotFound { name: String, builtin: String },
-}
+/// A scenario file that cannot be found, read, parsed or validated.
+pub type ScenarioError = TomlFileError;
 
 /// The scenarios shipped in `replay/scenarios/`, built into the binary so `eval` runs anywhere.
 pub const BUILTIN: &[(&str, &str)] = &[
@@ -218,16 +201,7 @@ pub struct NamedScenario {
 impl Scenario {
     /// Parse and validate TOML text; `path` only names the source in errors.
     pub fn from_toml(text: &str, path: &str) -> Result<Self, ScenarioError> {
-        let scn: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse {
-            path: path.to_string(),
-            line: crate::telemetry::profile::toml_error_line(text, &e),
-            message: e.message().trim().replace('\n', " "),
-        })?;
-        scn.validate().map_err(|message| ScenarioError::Invalid {
-            path: path.to_string(),
-            message,
-        })?;
-        Ok(scn)
+        toml_file::parse(text, path, Scenario::validate)
     }
 
     /// The paper's simulation rather than a vehicle profile.
@@ -341,42 +315,12 @@ impl Scenario {
     }
 }
 
-/// Load a scenario from a file path, or from the built-in set by stem.
+/// Load a scenario from the built-in set by stem, or from a file path.
 pub fn resolve(name_or_path: &str) -> Result<NamedScenario, ScenarioError> {
-    let path = Path::new(name_or_path);
-    if path.exists() {
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Io {
-            path: name_or_path.to_string(),
-            source,
-        })?;
-        let name = path.file_stem().map_or(name_or_path.to_string(), |s| {
-            s.to_string_lossy().into_owned()
-        });
-        return Ok(NamedScenario {
-            name,
-            scenario: Scenario::from_toml(&text, name_or_path)?,
-        });
-    }
-    if let Some((stem, text)) = BUILTIN.iter().find(|(stem, _)| *stem == name_or_path) {
-        let label = format!("replay/scenarios/{stem}.toml");
-        return Ok(NamedScenario {
-            name: stem.to_string(),
-            scenario: Scenario::from_toml(text, &label)?,
-        });
-    }
-    if name_or_path.ends_with(".toml") || name_or_path.contains('/') {
-        return Err(ScenarioError::Io {
-            path: name_or_path.to_string(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        });
-    }
-    Err(ScenarioError::NotFound {
-        name: name_or_path.to_string(),
-        builtin: BUILTIN
-            .iter()
-            .map(|(s, _)| *s)
-            .collect::<Vec<_>>()
-            .join(", "),
+    let source = toml_file::find(name_or_path, BUILTIN, "replay/scenarios", "scenario")?;
+    Ok(NamedScenario {
+        scenario: Scenario::from_toml(&source.text, &source.label)?,
+        name: source.stem,
     })
 }
 

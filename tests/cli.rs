@@ -24,6 +24,8 @@ fn assert_one_line_error(args: &[&str], must_contain: &[&str]) {
     for s in must_contain {
         assert!(err.contains(s), "`{s}` missing from: {err}");
     }
+    // The operating system's reason is said once, not once per link of the error chain.
+    assert!(err.matches("(os error").count() <= 1, "said twice: {err}");
 }
 
 const VALID: &str = r#"vehicle = "paper-heli"
@@ -35,7 +37,14 @@ measurement_noise = { kind = "gaussian", schedule = [{ t = 0.0, level = 2.89e-6 
 
 #[test]
 fn missing_file() {
-    assert_one_line_error(&["eval", "does/not/exist.toml"], &["does/not/exist.toml"]);
+    assert_one_line_error(
+        &["eval", "does/not/exist.toml"],
+        &["does/not/exist.toml", "(os error"],
+    );
+    assert_one_line_error(
+        &["replay", "does/not/exist.tlog"],
+        &["does/not/exist.tlog", "(os error"],
+    );
     assert_one_line_error(
         &["eval", "no-such-scenario"],
         &["no-such-scenario", "paper-fig5-gaussian"],

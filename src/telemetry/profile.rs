@@ -5,9 +5,8 @@
 //! surface) times the vehicle's axis gains, or from an explicit `effectiveness` column.
 
 use crate::model::{MAX_ACTUATORS, RateParams};
+use crate::toml_file::{self, TomlFileError};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
-use thiserror::Error;
 
 /// What an actuator is; decides the normalisation and the geometry of its `G` column.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -200,24 +199,8 @@ pub enum VehicleKind {
     Plane,
 }
 
-#[derive(Debug, Error)]
-pub enum ProfileError {
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
-    #[error("{path}:{line}: {message}")]
-    Parse {
-        path: String,
-        line: usize,
-        message: String,
-    },
-    #[error("{path}: {message}")]
-    Invalid { path: String, message: String },
-    #[error("no profile file or built-in profile named `{name}` (built-in: {builtin})")]
-    NotFound { name: String, builtin: String },
-}
+/// A profile file that cannot be found, read, parsed or validated.
+pub type ProfileError = TomlFileError;
 
 /// The profiles shipped in `replay/profiles/`.
 pub const BUILTIN: &[(&str, &str)] = &[
@@ -238,49 +221,16 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("plane", include_str!("../../replay/profiles/plane.toml")),
 ];
 
-/// Line (1-based) of a TOML error's span.
-pub(crate) fn toml_error_line(text: &str, e: &toml::de::Error) -> usize {
-    e.span().map_or(0, |s| {
-        text[..s.start.min(text.len())].matches('\n').count() + 1
-    })
-}
-
 impl Profile {
     /// Parse and validate TOML text; `path` names the source in errors.
     pub fn from_toml(text: &str, path: &str) -> Result<Self, ProfileError> {
-        let p: Profile = toml::from_str(text).map_err(|e| ProfileError::Parse {
-            path: path.to_string(),
-            line: toml_error_line(text, &e),
-            message: e.message().trim().replace('\n', " "),
-        })?;
-        p.validate().map_err(|message| ProfileError::Invalid {
-            path: path.to_string(),
-            message,
-        })?;
-        Ok(p)
+        toml_file::parse(text, path, Profile::validate)
     }
 
     /// A built-in profile by name, or a profile file by path.
     pub fn resolve(name_or_path: &str) -> Result<Self, ProfileError> {
-        if let Some((stem, text)) = BUILTIN.iter().find(|(s, _)| *s == name_or_path) {
-            return Self::from_toml(text, &format!("replay/profiles/{stem}.toml"));
-        }
-        let path = Path::new(name_or_path);
-        if path.exists() || name_or_path.ends_with(".toml") || name_or_path.contains('/') {
-            let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
-                path: name_or_path.to_string(),
-                source,
-            })?;
-            return Self::from_toml(&text, name_or_path);
-        }
-        Err(ProfileError::NotFound {
-            name: name_or_path.to_string(),
-            builtin: BUILTIN
-                .iter()
-                .map(|(s, _)| *s)
-                .collect::<Vec<_>>()
-                .join(", "),
-        })
+        let source = toml_file::find(name_or_path, BUILTIN, "replay/profiles", "profile")?;
+        Self::from_toml(&source.text, &source.label)
     }
 
     pub fn actuator_names(&self) -> Vec<String> {
