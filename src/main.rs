@@ -612,10 +612,19 @@ fn monitor(
     let counters = rt.block_on(async {
         let link = Link::open(spec.clone()).await?;
         let local = link.local_addr();
-        eprintln!(
-            "monitor: listening on {spec}{}",
-            local.map_or(String::new(), |a| format!(" (local {a})"))
-        );
+        let verb = match spec {
+            ConnSpec::UdpIn(_) | ConnSpec::TcpIn(_) => "listening on",
+            ConnSpec::UdpOut(_) | ConnSpec::UdpBcast(_) => "sending to",
+            ConnSpec::TcpOut(_) => "connected to",
+            ConnSpec::Serial(..) => "reading",
+        };
+        match link.not_connected() {
+            Some(why) => eprintln!("monitor: {spec}: {why}; retrying every second"),
+            None => eprintln!(
+                "monitor: {verb} {spec}{}",
+                local.map_or(String::new(), |a| format!(" (local {a})"))
+            ),
+        }
         let alert_link = match &alerts {
             Some(a) => {
                 eprintln!("monitor: alerts to {a} (sysid of the vehicle, component 191)");

@@ -94,6 +94,8 @@ enum Transport {
     TcpOut {
         addr: SocketAddr,
         stream: Option<TcpStream>,
+        /// Why the first connection attempt failed (the link retries every second).
+        refused: Option<String>,
     },
     /// Read as a byte stream through our own framer, like TCP, so that bad CRCs, resyncs
     /// and unknown ids on a radio link are counted too.
@@ -161,10 +163,17 @@ impl Link {
                 listener: TcpListener::bind(a).await.map_err(io)?,
                 stream: None,
             },
-            ConnSpec::TcpOut(a) => Transport::TcpOut {
-                addr: *a,
-                stream: TcpStream::connect(a).await.ok(),
-            },
+            ConnSpec::TcpOut(a) => {
+                let (stream, refused) = match TcpStream::connect(a).await {
+                    Ok(s) => (Some(s), None),
+                    Err(e) => (None, Some(e.to_string())),
+                };
+                Transport::TcpOut {
+                    addr: *a,
+                    stream,
+                    refused,
+                }
+            }
             ConnSpec::Serial(dev, baud) => {
                 use tokio_serial::SerialPortBuilderExt;
                 let port = tokio_serial::new(dev.as_str(), *baud)
@@ -187,6 +196,19 @@ impl Link {
         match &self.transport {
             Transport::Udp { sock, .. } => sock.local_addr().ok(),
             Transport::TcpIn { listener, .. } => listener.local_addr().ok(),
+            _ => None,
+        }
+    }
+
+    /// Why an outgoing TCP link is not connected yet (it keeps retrying every second); None
+    /// for every other link, and once connected.
+    pub fn not_connected(&self) -> Option<&str> {
+        match &self.transport {
+            Transport::TcpOut {
+                stream: None,
+                refused,
+                ..
+            } => Some(refused.as_deref().unwrap_or("connection lost")),
             _ => None,
         }
     }
@@ -237,7 +259,7 @@ impl Link {
                         Ok(n) => self.framer.push(&self.buf[..n]),
                     },
                 },
-                Transport::TcpOut { addr, stream } => match stream {
+                Transport::TcpOut { addr, stream, .. } => match stream {
                     None => {
                         tokio::time::sleep(Duration::from_secs(1)).await;
                         if let Ok(s) = TcpStream::connect(*addr).await {
@@ -288,7 +310,7 @@ impl Link {
                 }
                 Ok(write_or_drop(stream, frame).await)
             }
-            Transport::TcpOut { addr, stream } => {
+            Transport::TcpOut { addr, stream, .. } => {
                 if stream.is_none() {
                     match TcpStream::connect(*addr).await {
                         Ok(s) => {
@@ -305,5 +327,39 @@ impl Link {
                 Ok(true)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn runtime() -> tokio::runtime::Runtime {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime")
+    }
+
+    #[test]
+    fn outgoing_tcp_says_why_it_is_not_connected() {
+        runtime().block_on(async {
+            // A port nobody listens on any more: the link opens and says why it waits.
+            let closed = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+            let port = closed.local_addr().expect("addr").port();
+            drop(closed);
+            let spec: ConnSpec = format!("tcpout:127.0.0.1:{port}").parse().expect("spec");
+            let link = Link::open(spec).await.expect("opens while refused");
+            assert!(link.not_connected().is_some_and(|why| !why.is_empty()));
+            // With a listener it is connected at once.
+            let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+            let addr = listener.local_addr().expect("addr");
+            let spec: ConnSpec = format!("tcpout:{addr}").parse().expect("spec");
+            let link = Link::open(spec).await.expect("connects");
+            assert_eq!(link.not_connected(), None);
+            // Other links never wait for a connection.
+            let udp: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
+            assert_eq!(Link::open(udp).await.expect("binds").not_connected(), None);
+        });
     }
 }
