@@ -410,7 +410,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 ))
                 .into());
             }
-            let speed = positive("--speed", speed)?;
+            let speed = in_range("--speed", speed, SPEED_RANGE.0, SPEED_RANGE.1)?;
             eprintln!("demo: {}", named.scenario.description);
             let args = RunArgs {
                 profile: None,
@@ -476,9 +476,23 @@ fn positive(name: &str, v: f64) -> anyhow::Result<f64> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(UsageError(format!("{name} {v}: must be a positive number")).into())
+        Err(UsageError(format!("{name} {v:?}: must be a positive number")).into())
     }
 }
+
+/// A speed-up factor or a duration (s) that becomes a `Duration` or divides one: bounded, so
+/// that no conversion overflows (`--speed 1e-300` would ask to wait 10^300 s).
+fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> anyhow::Result<f64> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(UsageError(format!("{name} {v:?}: must be between {lo} and {hi}")).into())
+    }
+}
+
+/// Bounds of `--speed` (multiple of real time) and of the monitor's timeouts (s).
+const SPEED_RANGE: (f64, f64) = (1e-3, 1e6);
+const TIMEOUT_RANGE_S: (f64, f64) = (1e-3, 1e6);
 
 /// The simulated vehicle as a MAVLink autopilot: to a live connection and/or a tlog.
 fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
@@ -491,7 +505,10 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         ))
         .into());
     }
-    let speed = o.speed.map(|x| positive("--speed", x)).transpose()?;
+    let speed = o
+        .speed
+        .map(|x| in_range("--speed", x, SPEED_RANGE.0, SPEED_RANGE.1))
+        .transpose()?;
     let spec: Option<ConnSpec> = o.out.as_deref().map(str::parse).transpose()?;
     let mut tlog = o
         .tlog
@@ -594,12 +611,20 @@ fn monitor(
     let dashboard = !headless && std::io::stdout().is_terminal();
     let alerts: Option<ConnSpec> = alerts.map(str::parse).transpose()?;
     let opts = ahcmon::link::live::LiveOptions {
-        link_timeout: std::time::Duration::from_secs_f64(positive("--link-timeout", link_timeout)?),
+        link_timeout: std::time::Duration::from_secs_f64(in_range(
+            "--link-timeout",
+            link_timeout,
+            TIMEOUT_RANGE_S.0,
+            TIMEOUT_RANGE_S.1,
+        )?),
         exit_idle: exit_idle
-            .map(|s| positive("--exit-idle", s).map(std::time::Duration::from_secs_f64))
+            .map(|s| {
+                in_range("--exit-idle", s, TIMEOUT_RANGE_S.0, TIMEOUT_RANGE_S.1)
+                    .map(std::time::Duration::from_secs_f64)
+            })
             .transpose()?,
         request_rates: request_rates
-            .map(|hz| positive("--request-rates", hz))
+            .map(|hz| in_range("--request-rates", hz, 0.1, 1000.0))
             .transpose()?,
         ..Default::default()
     };
@@ -806,13 +831,8 @@ fn replay(
     plot: Option<&std::path::Path>,
     headless: bool,
 ) -> anyhow::Result<()> {
-    if let Some(x) = speed
-        && !(x.is_finite() && x > 0.0)
-    {
-        return Err(UsageError(format!(
-            "--speed {x}: must be a positive multiple of real time"
-        ))
-        .into());
+    if let Some(x) = speed {
+        in_range("--speed", x, SPEED_RANGE.0, SPEED_RANGE.1)?;
     }
     let input_error = |source| InputFileError {
         path: file.display().to_string(),
@@ -856,7 +876,10 @@ fn replay(
         }
         if let Some(x) = speed {
             let t0 = *first_ts.get_or_insert(ts);
-            let due = std::time::Duration::from_secs_f64(ts.saturating_sub(t0) as f64 * 1e-6 / x);
+            // A garbage timestamp far ahead must not stop the replay: no wait for it.
+            let due =
+                std::time::Duration::try_from_secs_f64(ts.saturating_sub(t0) as f64 * 1e-6 / x)
+                    .unwrap_or_default();
             if let Some(wait) = due.checked_sub(started.elapsed()) {
                 std::thread::sleep(wait);
             }

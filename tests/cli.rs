@@ -81,6 +81,27 @@ fn bad_arguments_exit_2() {
     assert_eq!(code, 2);
     let (code, _, _) = ahcmon(&["frobnicate"]);
     assert_eq!(code, 2);
+    // Values that would overflow a duration: refused up front, no panic.
+    assert_one_line_error(
+        &["replay", "does/not/matter.tlog", "--speed", "1e-300"],
+        &["--speed 1e-300", "between"],
+    );
+    assert_one_line_error(
+        &["monitor", "udpin:127.0.0.1:0", "--link-timeout", "1e300"],
+        &["--link-timeout 1e300", "between"],
+    );
+    assert_one_line_error(
+        &[
+            "sim",
+            "--scenario",
+            "heli-demo",
+            "--out",
+            "udpout:127.0.0.1:9",
+            "--speed",
+            "0",
+        ],
+        &["--speed 0.0", "between"],
+    );
 }
 
 #[test]
