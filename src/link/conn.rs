@@ -238,6 +238,9 @@ impl Link {
                         if *learn_peer {
                             *peer = Some(from);
                         }
+                        // What the last datagram left is a partial frame that cannot complete
+                        // (UDP keeps boundaries): counted, not joined to this one.
+                        self.framer.end_datagram();
                         self.framer.push(&self.buf[..n]);
                         // Parse this datagram completely before the next one.
                         if let Some(f) = self.framer.next_frame() {
@@ -255,7 +258,11 @@ impl Link {
                         *stream = Some(s);
                     }
                     Some(s) => match s.read(&mut self.buf).await {
-                        Ok(0) | Err(_) => *stream = None,
+                        // A partial frame of the lost connection cannot complete either.
+                        Ok(0) | Err(_) => {
+                            *stream = None;
+                            self.framer.end_datagram();
+                        }
                         Ok(n) => self.framer.push(&self.buf[..n]),
                     },
                 },
@@ -268,7 +275,11 @@ impl Link {
                         }
                     }
                     Some(s) => match s.read(&mut self.buf).await {
-                        Ok(0) | Err(_) => *stream = None,
+                        // A partial frame of the lost connection cannot complete either.
+                        Ok(0) | Err(_) => {
+                            *stream = None;
+                            self.framer.end_datagram();
+                        }
                         Ok(n) => self.framer.push(&self.buf[..n]),
                     },
                 },
@@ -360,6 +371,38 @@ mod tests {
             // Other links never wait for a connection.
             let udp: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
             assert_eq!(Link::open(udp).await.expect("binds").not_connected(), None);
+        });
+    }
+
+    #[test]
+    fn a_partial_frame_at_a_datagram_end_is_counted_not_joined_to_the_next() {
+        use crate::link::dialects::ahcmon::{HEARTBEAT_DATA, MavMessage};
+        runtime().block_on(async {
+            let spec: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
+            let mut link = Link::open(spec).await.expect("binds");
+            let to = link.local_addr().expect("addr");
+            let mut frame = Vec::new();
+            let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
+            super::super::frame::encode_v2(1, 1, 0, &hb, &mut frame);
+            // Datagram 1: a whole frame, then the first half of another; datagram 2: the
+            // second half (alone it is no frame), then a whole frame.
+            let half = frame.len() / 2;
+            let first = [frame.as_slice(), &frame[..half]].concat();
+            let second = [&frame[half..], frame.as_slice()].concat();
+            let sock = UdpSocket::bind("127.0.0.1:0").await.expect("bind");
+            sock.send_to(&first, to).await.expect("send");
+            sock.send_to(&second, to).await.expect("send");
+            for _ in 0..2 {
+                tokio::time::timeout(Duration::from_secs(5), link.recv())
+                    .await
+                    .expect("a frame in time")
+                    .expect("a frame");
+            }
+            let c = link.counters();
+            assert_eq!(c.frames, 2, "{c:?}");
+            assert_eq!(c.truncated, 1, "{c:?}");
+            // The two halves were never parsed as one frame.
+            assert_eq!(c.bad_crc, 0, "{c:?}");
         });
     }
 }

@@ -214,11 +214,16 @@ impl StreamFramer {
                     break;
                 }
                 Parsed::Incomplete(_) => break,
-                Parsed::UnknownId(n) => {
+                // An unknown id has no CRC we can check, so its length byte is trusted only
+                // when the next frame (or the end of the bytes) follows it; otherwise this is
+                // most likely a magic byte inside a damaged frame, and skipping by its length
+                // would swallow the good frames behind it.
+                Parsed::UnknownId(n) if self.frame_follows(pos + n) => {
                     pos += n;
                     self.syncing = false;
                     self.counters.unknown_id += 1;
                 }
+                Parsed::UnknownId(_) => self.slide(&mut pos),
                 Parsed::ParseError(n) => {
                     pos += n;
                     self.counters.parse_error += 1;
@@ -234,6 +239,12 @@ impl StreamFramer {
         out
     }
 
+    fn frame_follows(&self, at: usize) -> bool {
+        self.buf
+            .get(at)
+            .is_none_or(|&b| b == MAGIC_V1 || b == MAGIC_V2)
+    }
+
     fn slide(&mut self, pos: &mut usize) {
         if !self.syncing {
             self.counters.resync += 1;
@@ -243,12 +254,61 @@ impl StreamFramer {
         *pos += 1;
     }
 
-    /// End of a datagram: a partial frame left over cannot complete (UDP keeps boundaries).
+    /// End of a datagram (UDP keeps boundaries) or of a connection: a partial frame left over
+    /// cannot complete; it is counted as truncated and dropped.
     pub fn end_datagram(&mut self) {
         if !self.buf.is_empty() {
             self.counters.truncated += 1;
             self.counters.skipped_bytes += self.buf.len() as u64;
             self.buf.clear();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::dialects::ahcmon::ATTITUDE_DATA;
+
+    fn attitude_frame(k: u32) -> Vec<u8> {
+        let msg = MavMessage::ATTITUDE(ATTITUDE_DATA {
+            time_boot_ms: 1000 + 20 * k,
+            roll: 0.1,
+            pitch: 0.2,
+            yaw: 0.3,
+            rollspeed: 0.01,
+            pitchspeed: 0.02,
+            yawspeed: 0.03,
+        });
+        let mut out = Vec::new();
+        encode_v2(1, 1, k as u8, &msg, &mut out);
+        out
+    }
+
+    #[test]
+    fn a_magic_byte_inside_a_damaged_frame_does_not_swallow_good_frames() {
+        // A frame whose payload was damaged so that it holds what looks like the header of a
+        // 252-byte v2 frame with an unknown id; its CRC no longer matches.
+        let mut damaged = attitude_frame(0);
+        damaged[10..20].copy_from_slice(&[0xFD, 0xF0, 0, 0, 7, 1, 1, 0xEE, 0xEE, 0x0E]);
+        let mut bytes = damaged.clone();
+        let good = 12;
+        for k in 1..=good {
+            bytes.extend(attitude_frame(k));
+        }
+        assert!(
+            bytes.len() > 10 + 252,
+            "the fake length must reach into the good frames"
+        );
+        let mut framer = StreamFramer::default();
+        framer.push(&bytes);
+        let mut frames = 0;
+        while framer.next_frame().is_some() {
+            frames += 1;
+        }
+        assert_eq!(frames, good, "{:?}", framer.counters);
+        assert_eq!(framer.counters.bad_crc, 1);
+        assert_eq!(framer.counters.unknown_id, 0);
+        assert_eq!(framer.counters.skipped_bytes as usize, damaged.len());
     }
 }
