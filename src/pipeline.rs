@@ -109,13 +109,17 @@ pub struct PipelineCounters {
     pub steps: u64,
     /// Steps whose filter update failed (the filter was reset).
     pub filter_errors: u64,
-    /// Gaps of more than five sample periods between samples while estimating.
+    /// Intervals of more than 1.5 sample periods between samples while estimating (lost
+    /// samples; a missing a_z leaves one too). The filters step across them as one period,
+    /// and what came before is no longer the previous step for the command history.
     pub gaps: u64,
     /// Intervals of more than 1.5 sample periods in the calibration stretch (the steps across
     /// them are left out of the fit).
     pub calibration_gaps: u64,
     /// Samples dropped for lack of a_z when the model measures it (while calibrating too).
     pub missing_az: u64,
+    /// Samples dropped because an actuator's output channel carried no PWM (0 or absent).
+    pub missing_output: u64,
     pub decisions: u64,
 }
 
@@ -136,6 +140,8 @@ pub struct VehiclePipeline {
     pub last_sample_t: Option<f64>,
     /// Actuators with a fault in force, by index.
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
+    /// Said once that an output channel carries no PWM.
+    warned_missing_output: bool,
 }
 
 /// The calibrated profile's rate and noise levels: the process noise from what the model could
@@ -183,6 +189,7 @@ impl VehiclePipeline {
             last: None,
             last_sample_t: None,
             active: [None; MAX_ACTUATORS],
+            warned_missing_output: false,
         }
     }
 
@@ -249,16 +256,50 @@ impl VehiclePipeline {
         }
     }
 
-    fn normalise(profile: &Profile, s: &TelemetrySample) -> Option<[f64; MAX_ACTUATORS]> {
+    /// The profile's actuators' commands, normalised; Err(index of the first actuator whose
+    /// channel carried no PWM).
+    fn normalise(profile: &Profile, s: &TelemetrySample) -> Result<[f64; MAX_ACTUATORS], usize> {
         let mut u = [0.0; MAX_ACTUATORS];
         for (j, a) in profile.actuators.iter().enumerate() {
-            let pwm = *s.pwm.get(usize::from(a.channel).checked_sub(1)?)?;
+            let pwm = usize::from(a.channel)
+                .checked_sub(1)
+                .and_then(|c| s.pwm.get(c))
+                .copied()
+                .unwrap_or(0);
             if pwm == 0 {
-                return None;
+                return Err(j);
             }
             u[j] = profile.normalise(j, f64::from(pwm));
         }
-        Some(u)
+        Ok(u)
+    }
+
+    /// `normalise`, counting a sample it cannot use and saying so once per run.
+    fn commands(
+        counters: &mut PipelineCounters,
+        warned: &mut bool,
+        sysid: u8,
+        profile: &Profile,
+        s: &TelemetrySample,
+        sink: &mut dyn PipelineSink,
+    ) -> Option<[f64; MAX_ACTUATORS]> {
+        match Self::normalise(profile, s) {
+            Ok(u) => Some(u),
+            Err(j) => {
+                counters.missing_output += 1;
+                if !std::mem::replace(warned, true) {
+                    let a = &profile.actuators[j];
+                    sink.message(
+                        sysid,
+                        &format!(
+                            "warning: no PWM on output channel {} ({}): samples without it are dropped and counted",
+                            a.channel, a.name
+                        ),
+                    );
+                }
+                None
+            }
+        }
     }
 
     pub fn on_sample(
@@ -327,7 +368,10 @@ impl VehiclePipeline {
                 }
             }
             Stage::Calibrating { profile, samples } => {
-                let Some(u) = Self::normalise(profile, s) else {
+                let warned = &mut self.warned_missing_output;
+                let Some(u) =
+                    Self::commands(&mut self.counters, warned, self.sysid, profile, s, sink)
+                else {
                     return;
                 };
                 samples.push(StoredSample {
@@ -348,7 +392,10 @@ impl VehiclePipeline {
                 }
             }
             Stage::Running(r) => {
-                let Some(u) = Self::normalise(&r.profile, s) else {
+                let warned = &mut self.warned_missing_output;
+                let Some(u) =
+                    Self::commands(&mut self.counters, warned, self.sysid, &r.profile, s, sink)
+                else {
                     return;
                 };
                 let Some(prev_u) = r.prev_u.replace(u) else {
@@ -357,7 +404,20 @@ impl VehiclePipeline {
                     r.rates_prev = [s.rates; 2];
                     return;
                 };
-                if s.t - r.last_t > 5.0 * r.dt {
+                let mut y = [0.0; 4];
+                y[..3].copy_from_slice(&s.rates);
+                if r.m == 4 {
+                    match s.az {
+                        Some(a) => y[3] = a,
+                        None => {
+                            // Skipped: the next sample then follows a gap (last_t stays).
+                            self.counters.missing_az += 1;
+                            return;
+                        }
+                    }
+                }
+                // The same limit as the calibration's: a lost sample is a gap.
+                if s.t - r.last_t > 1.5 * r.dt {
                     self.counters.gaps += 1;
                     // What came before the gap is no longer the previous step: no delayed
                     // commands from it (the oldest known stands in) and no increment across it.
@@ -366,17 +426,6 @@ impl VehiclePipeline {
                 }
                 r.last_t = s.t;
                 // The outputs sent at the previous instant act until this one.
-                let mut y = [0.0; 4];
-                y[..3].copy_from_slice(&s.rates);
-                if r.m == 4 {
-                    match s.az {
-                        Some(a) => y[3] = a,
-                        None => {
-                            self.counters.missing_az += 1;
-                            return;
-                        }
-                    }
-                }
                 r.u_history[r.u_pushed % U_HISTORY] = prev_u;
                 r.u_pushed += 1;
                 // Until the history covers the delay (after a gap), the oldest command stands in.
@@ -655,9 +704,19 @@ mod tests {
         fn link_event(&mut self, _: &Decision) {}
     }
 
-    /// Flies the simulated quad through the pipeline; with `lossy`, one sample in ten never
-    /// arrives. Returns the pipeline, its messages and the samples lost while calibrating.
-    fn fly_quad(lossy: bool) -> (VehiclePipeline, Messages, u64) {
+    /// What happens to one sample on its way.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    enum Damage {
+        Intact,
+        Lost,
+        NoAz,
+        NoPwm,
+    }
+
+    /// Flies the simulated quad through the pipeline, `damage(k, estimating)` deciding what
+    /// happens to sample k. Returns the pipeline, its messages and the samples lost while
+    /// calibrating.
+    fn fly_quad_with(damage: impl Fn(usize, bool) -> Damage) -> (VehiclePipeline, Messages, u64) {
         let profile = Profile::resolve("quad-x").unwrap();
         let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 3)).unwrap();
         let cfg = PipelineConfig {
@@ -670,7 +729,9 @@ mod tests {
         let mut lost_in_stretch = 0;
         for k in 0..2000 {
             let s = sim.step();
-            if lossy && k % 10 == 9 {
+            let estimating = matches!(pipeline.stage, Stage::Running(_));
+            let d = damage(k, estimating);
+            if d == Damage::Lost {
                 let calibrating = matches!(pipeline.stage, Stage::Calibrating { .. });
                 lost_in_stretch += u64::from(calibrating);
                 continue;
@@ -679,11 +740,14 @@ mod tests {
             for (j, a) in profile.actuators.iter().enumerate() {
                 pwm[usize::from(a.channel) - 1] = profile.to_pwm(j, s.u[j]).round() as u16;
             }
+            if d == Damage::NoPwm {
+                pwm[2] = 0;
+            }
             let sample = TelemetrySample {
                 t: s.t,
                 rates: [s.y[0], s.y[1], s.y[2]],
                 attitude: s.attitude,
-                az: profile.model.measure_az.then_some(s.y[3]),
+                az: (profile.model.measure_az && d != Damage::NoAz).then_some(s.y[3]),
                 pwm,
                 armed: true,
                 rel_alt: Some(10.0),
@@ -691,6 +755,46 @@ mod tests {
             pipeline.on_sample(&sample, &info, &mut sink);
         }
         (pipeline, sink, lost_in_stretch)
+    }
+
+    /// With `lossy`, one sample in ten never arrives.
+    fn fly_quad(lossy: bool) -> (VehiclePipeline, Messages, u64) {
+        fly_quad_with(|k, _| {
+            if lossy && k % 10 == 9 {
+                Damage::Lost
+            } else {
+                Damage::Intact
+            }
+        })
+    }
+
+    /// While estimating: every lost sample and every sample without a_z leaves a counted gap
+    /// (the next step does not pretend to follow the previous one); a sample whose actuator
+    /// channel carries no PWM is counted and said once.
+    #[test]
+    fn estimating_counts_lost_samples_missing_az_and_missing_outputs() {
+        let damage = |k: usize, estimating: bool| match k % 50 {
+            _ if !estimating => Damage::Intact,
+            7 => Damage::Lost,
+            21 => Damage::NoAz,
+            33 => Damage::NoPwm,
+            _ => Damage::Intact,
+        };
+        let (clean, _, _) = fly_quad(false);
+        let (p, said, _) = fly_quad_with(damage);
+        assert!(matches!(p.stage, Stage::Running(_)), "{:?}", said.0);
+        assert_eq!(clean.counters.gaps, 0);
+        let c = p.counters;
+        let each = c.missing_az;
+        assert!(each >= 5, "{c:?}");
+        assert_eq!(c.missing_output, each, "{c:?}");
+        // One gap after each lost sample, each sample without a_z and each without outputs.
+        assert_eq!(c.gaps, 3 * each, "{c:?}");
+        // And no filter step for any of the three.
+        assert_eq!(clean.counters.steps - c.steps, 3 * each, "{c:?}");
+        let warnings: Vec<_> = said.0.iter().filter(|m| m.contains("no PWM")).collect();
+        assert_eq!(warnings.len(), 1, "{:?}", said.0);
+        assert!(warnings[0].contains("channel 3"), "{}", warnings[0]);
     }
 
     /// One sample in ten lost during the calibration stretch: every hole is counted and said

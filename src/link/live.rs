@@ -54,8 +54,9 @@ pub async fn run(
     opts: LiveOptions,
 ) -> Result<LiveCounters, super::conn::ConnError> {
     let clock = Instant::now();
-    // The reader's drop counters, for the dashboard's footer while running.
-    let live_counters = std::sync::Arc::new(std::sync::Mutex::new(FrameCounters::default()));
+    // The reader's drop counters, for the dashboard's footer while running and for the
+    // summary if the reader does not hand back its final ones in time.
+    let live_counters = std::sync::Arc::new(std::sync::Mutex::new(LiveCounters::default()));
     let reader_counters = live_counters.clone();
     let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
     let (done_tx, done_rx) =
@@ -73,11 +74,14 @@ pub async fn run(
                 }
                 r = link.recv() => match r {
                     Ok(frame) => {
-                        if let Ok(mut c) = reader_counters.lock() {
-                            *c = link.counters();
-                        }
                         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                             drops += 1;
+                        }
+                        if let Ok(mut c) = reader_counters.lock() {
+                            *c = LiveCounters {
+                                link: link.counters(),
+                                backpressure_drops: drops,
+                            };
                         }
                     }
                     Err(e) => break Err(e),
@@ -147,7 +151,7 @@ pub async fn run(
                     if let crate::output::dashboard::KeyAction::Quit = ui.keys(monitor) {
                         break;
                     }
-                    let counters = live_counters.lock().map(|c| *c).unwrap_or_default();
+                    let counters = live_counters.lock().map(|c| c.link).unwrap_or_default();
                     let age = any_frame.map(|t| now.duration_since(t).as_secs_f64());
                     let lost_any = lost.values().any(|l| *l) || any_frame.is_none();
                     let _ = ui.draw(monitor, &sink.seen, counters, age, lost_any);
@@ -170,7 +174,9 @@ pub async fn run(
     reader.abort();
     match result {
         Ok(Ok(r)) => r,
-        _ => Ok(LiveCounters::default()),
+        // The reader is stuck (e.g. a tcpin send waiting for a client): its counters as of
+        // its last frame, not zeros.
+        _ => Ok(live_counters.lock().map(|c| *c).unwrap_or_default()),
     }
 }
 

@@ -23,7 +23,7 @@ pub fn render(
         let c = &v.counters;
         let _ = writeln!(
             s,
-            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots, {} non-finite",
+            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} samples dropped at them), {} non-finite",
             v.info
                 .mav_type
                 .map_or("unknown".to_string(), |t| format!("{t:?}")
@@ -34,6 +34,7 @@ pub fn render(
             c.out_of_order,
             c.duplicates,
             c.reboots,
+            c.dropped_at_reboot,
             c.non_finite
         );
         let Some(p) = monitor.pipelines.get(sysid) else {
@@ -46,13 +47,14 @@ pub fn render(
         let pc = &p.counters;
         let _ = writeln!(
             s,
-            "  pipeline: {}; {} filter steps, {} gaps while estimating, {} while calibrating, {} filter resets, {} samples without a_z",
+            "  pipeline: {}; {} filter steps, {} gaps while estimating, {} while calibrating, {} filter resets, {} samples without a_z, {} without an actuator's PWM",
             p.stage_name(),
             pc.steps,
             pc.gaps,
             pc.calibration_gaps,
             pc.filter_errors,
-            pc.missing_az
+            pc.missing_az,
+            pc.missing_output
         );
         if let Some(d) = &p.detection {
             let _ = writeln!(s, "  profile: {}", d.source);

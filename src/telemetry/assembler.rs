@@ -12,8 +12,10 @@ use std::collections::BTreeMap;
 
 /// Standard gravity (ArduPilot's GRAVITY_MSS): RAW_IMU / SCALED_IMU accelerations are in mG.
 const G0: f64 = 9.80665;
-/// Largest backwards step of the vehicle clock treated as reordering; more is a reboot.
+/// Largest backwards step of the vehicle clock treated as reordering; more is a reboot when a
+/// second message confirms the new clock (within this window of the first).
 const REBOOT_BACKSTEP_S: f64 = 1.0;
+const REBOOT_CONFIRM_S: f64 = 5.0;
 
 /// One instant of one vehicle: what an estimator step needs, before normalisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,8 +44,11 @@ pub struct TelemetryCounters {
     /// Messages older than the last sample (reordered) or at the same instant (duplicates).
     pub out_of_order: u64,
     pub duplicates: u64,
-    /// Vehicle clock jumped back by more than a second.
+    /// Vehicle clock jumped back by more than a second (confirmed by a second message).
     pub reboots: u64,
+    /// Samples still waiting for their a_z when the vehicle rebooted: dropped, not fed to the
+    /// new boot's filters.
+    pub dropped_at_reboot: u64,
     /// Messages with NaN / inf in the fields we use.
     pub non_finite: u64,
 }
@@ -104,6 +109,9 @@ pub struct VehicleAssembler {
     clock: Option<f64>,
     /// Set when a reboot was seen; the caller resets its filters.
     pub rebooted: bool,
+    /// A message more than a second behind the clock, held until a second one confirms a
+    /// reboot (a single stale message, e.g. from a second link, is only out of order).
+    reboot_candidate: Option<f64>,
     /// The vehicle sends IMU accelerations: a complete instant waits for its a_z.
     has_imu: bool,
     pending: Option<TelemetrySample>,
@@ -138,6 +146,7 @@ impl VehicleAssembler {
             last_sample_t: None,
             clock: None,
             rebooted: false,
+            reboot_candidate: None,
             has_imu: false,
             pending: None,
         }
@@ -151,34 +160,53 @@ impl VehicleAssembler {
         }
     }
 
-    /// Advance the clock; false if `t` is stale (reordered) — the message is then dropped.
+    /// More than a second behind the vehicle clock: stale, or the first message of a reboot.
+    fn behind(&self, t: f64) -> bool {
+        self.clock.is_some_and(|c| t < c - REBOOT_BACKSTEP_S)
+    }
+
+    /// Advance the clock; false if `t` is stale (reordered) — the message is then dropped and
+    /// counted. The first message of a new boot is dropped too, until the second confirms it.
     fn tick(&mut self, t: f64) -> bool {
-        match self.clock {
-            Some(c) if t < c - REBOOT_BACKSTEP_S => {
-                self.counters.reboots += 1;
-                self.rebooted = true;
-                self.rates = None;
-                self.outputs = None;
-                self.az = None;
-                self.last_sample_t = None;
-                self.clock = Some(t);
-                true
-            }
-            Some(c) => {
-                self.clock = Some(c.max(t));
-                true
-            }
-            None => {
-                self.clock = Some(t);
-                true
-            }
+        let Some(c) = self.clock else {
+            self.clock = Some(t);
+            return true;
+        };
+        if !self.behind(t) {
+            self.reboot_candidate = None;
+            self.clock = Some(c.max(t));
+            return true;
         }
+        let confirmed = self.reboot_candidate.is_some_and(|first| {
+            (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t)
+        });
+        if !confirmed {
+            self.reboot_candidate = Some(t);
+            self.counters.out_of_order += 1;
+            return false;
+        }
+        self.reboot_candidate = None;
+        self.counters.reboots += 1;
+        self.rebooted = true;
+        if self.pending.take().is_some() {
+            self.counters.dropped_at_reboot += 1;
+        }
+        self.rates = None;
+        self.outputs = None;
+        self.az = None;
+        self.last_sample_t = None;
+        self.clock = Some(t);
+        true
     }
 
     /// Feed one message; complete instants are appended to `out` (in time order).
     pub fn on_message(&mut self, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
-        // A new rate instant releases a sample still waiting for its a_z, without it.
-        if matches!(msg, MavMessage::ATTITUDE(_)) && self.is_autopilot_component(compid) {
+        // A new rate instant releases a sample still waiting for its a_z, without it; one from
+        // a clock far behind (stale, or a reboot) does not.
+        if let MavMessage::ATTITUDE(a) = msg
+            && self.is_autopilot_component(compid)
+            && !self.behind(f64::from(a.time_boot_ms) * 1e-3)
+        {
             out.extend(self.pending.take());
         }
         let emitted = self.message(compid, msg);
@@ -267,8 +295,16 @@ impl VehicleAssembler {
                 }
                 if let Some(prev) = self.rates
                     && !self.rates_used
-                    && prev.t != t
                 {
+                    // Rates still waiting for their outputs are newer, or the same instant.
+                    if t < prev.t {
+                        self.counters.out_of_order += 1;
+                        return None;
+                    }
+                    if t == prev.t {
+                        self.counters.duplicates += 1;
+                        return None;
+                    }
                     self.counters.unmatched += 1;
                 }
                 let rates = [v[0], v[1], v[2]].map(f64::from);
@@ -304,8 +340,7 @@ impl VehicleAssembler {
                     s.servo15_raw,
                     s.servo16_raw,
                 ];
-                self.outputs = Some(Stamped { t, v: pwm });
-                self.try_emit()
+                self.set_outputs(t, pwm)
             }
             MavMessage::ACTUATOR_OUTPUT_STATUS(s) => {
                 // PX4: outputs as PWM-like values in `actuator[]`, `active` bitmask.
@@ -320,8 +355,7 @@ impl VehicleAssembler {
                         *p = v as u16;
                     }
                 }
-                self.outputs = Some(Stamped { t, v: pwm });
-                self.try_emit()
+                self.set_outputs(t, pwm)
             }
             MavMessage::HIGHRES_IMU(m) => self.on_az(m.time_usec as f64 * 1e-6, f64::from(m.zacc)),
             MavMessage::SCALED_IMU(m) => {
@@ -338,6 +372,16 @@ impl VehicleAssembler {
             }
             _ => None,
         }
+    }
+
+    /// New outputs, unless older than those held (a reordered message: counted, dropped).
+    fn set_outputs(&mut self, t: f64, pwm: [u16; 16]) -> Option<TelemetrySample> {
+        if self.outputs.is_some_and(|o| t < o.t) {
+            self.counters.out_of_order += 1;
+            return None;
+        }
+        self.outputs = Some(Stamped { t, v: pwm });
+        self.try_emit()
     }
 
     fn on_az(&mut self, t: f64, az: f64) -> Option<TelemetrySample> {
@@ -427,5 +471,106 @@ impl Assembler {
         if let Some(v) = self.vehicles.get_mut(&sysid) {
             v.on_message(compid, msg, out);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::dialects::ahcmon::{ATTITUDE_DATA, RAW_IMU_DATA, SERVO_OUTPUT_RAW_DATA};
+
+    fn attitude(ms: u32) -> MavMessage {
+        MavMessage::ATTITUDE(ATTITUDE_DATA {
+            time_boot_ms: ms,
+            rollspeed: 0.1,
+            ..Default::default()
+        })
+    }
+
+    fn outputs(ms: u32, pwm: u16) -> MavMessage {
+        MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
+            time_usec: ms * 1000,
+            servo1_raw: pwm,
+            ..Default::default()
+        })
+    }
+
+    fn imu(ms: u32) -> MavMessage {
+        MavMessage::RAW_IMU(RAW_IMU_DATA {
+            time_usec: u64::from(ms) * 1000,
+            zacc: -1000,
+            ..Default::default()
+        })
+    }
+
+    /// Feed `msgs` from the autopilot component; the samples that come out.
+    fn feed(a: &mut VehicleAssembler, msgs: &[MavMessage]) -> Vec<TelemetrySample> {
+        let mut out = Vec::new();
+        for m in msgs {
+            a.on_message(1, m, &mut out);
+        }
+        out
+    }
+
+    #[test]
+    fn duplicates_and_reordered_messages_are_counted_not_used() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let got = feed(&mut a, &[attitude(1000), outputs(1000, 1500)]);
+        assert_eq!(got.len(), 1);
+        // The same instant again, and an older one: dropped and counted.
+        let got = feed(
+            &mut a,
+            &[attitude(1000), attitude(980), outputs(1000, 1500)],
+        );
+        assert!(got.is_empty());
+        assert_eq!((a.counters.duplicates, a.counters.out_of_order), (1, 1));
+        // Rates waiting for their outputs are not replaced by older or repeated rates.
+        let got = feed(&mut a, &[attitude(1040), attitude(1020), attitude(1040)]);
+        assert!(got.is_empty());
+        assert_eq!((a.counters.duplicates, a.counters.out_of_order), (2, 2));
+        // Outputs older than those held do not replace them; the waiting rates then pair with
+        // their own instant's outputs.
+        let got = feed(&mut a, &[outputs(1040, 1600), outputs(1000, 1400)]);
+        assert_eq!(got.len(), 1);
+        assert_eq!((got[0].t, got[0].pwm[0]), (1.04, 1600));
+        assert_eq!(a.counters.out_of_order, 3);
+        assert_eq!(a.counters.unmatched, 0);
+    }
+
+    #[test]
+    fn one_stale_message_is_not_a_reboot() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        feed(&mut a, &[attitude(600_000), outputs(600_000, 1500)]);
+        // A copy from a second link, 5 s late, then the stream goes on.
+        let got = feed(
+            &mut a,
+            &[attitude(595_000), attitude(600_020), outputs(600_020, 1500)],
+        );
+        assert_eq!(got.len(), 1);
+        assert!(!a.rebooted);
+        assert_eq!((a.counters.reboots, a.counters.out_of_order), (0, 1));
+    }
+
+    #[test]
+    fn a_reboot_drops_the_sample_waiting_for_its_az_and_starts_the_new_clock() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let got = feed(
+            &mut a,
+            &[attitude(600_000), outputs(600_000, 1500), imu(600_000)],
+        );
+        assert_eq!(got.len(), 1);
+        // The next instant's IMU message is lost; then the vehicle reboots.
+        let got = feed(&mut a, &[attitude(600_020), outputs(600_020, 1500)]);
+        assert!(got.is_empty(), "waits for its a_z");
+        let got = feed(&mut a, &[attitude(2_000), outputs(2_000, 1500), imu(2_000)]);
+        assert!(a.rebooted);
+        assert_eq!(a.counters.reboots, 1);
+        assert_eq!(a.counters.dropped_at_reboot, 1);
+        // Nothing of the old boot comes out after it; the new clock goes on from the next
+        // instant (the first message of the new boot only proposed the reboot).
+        assert!(got.iter().all(|s| s.t < 10.0), "{got:?}");
+        let got = feed(&mut a, &[attitude(2_020), outputs(2_020, 1500), imu(2_020)]);
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].t, 2.02);
     }
 }
