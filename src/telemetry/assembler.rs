@@ -114,6 +114,10 @@ pub struct VehicleAssembler {
     reboot_candidate: Option<f64>,
     /// The vehicle sends IMU accelerations: a complete instant waits for its a_z.
     has_imu: bool,
+    /// Smoothed interval between rate instants (s), once seen: the pairing tolerance stays
+    /// under half of it, so at high rates (`--request-rates 100`) a pair is never a
+    /// neighbour's.
+    rate_period: Option<f64>,
     pending: Option<TelemetrySample>,
 }
 
@@ -148,6 +152,7 @@ impl VehicleAssembler {
             rebooted: false,
             reboot_candidate: None,
             has_imu: false,
+            rate_period: None,
             pending: None,
         }
     }
@@ -210,8 +215,9 @@ impl VehicleAssembler {
             out.extend(self.pending.take());
         }
         let emitted = self.message(compid, msg);
+        let max_skew = self.max_skew();
         if let (Some(p), Some(a)) = (self.pending.as_mut(), self.az)
-            && (a.t - p.t).abs() <= self.cfg.max_skew_s
+            && (a.t - p.t).abs() <= max_skew
         {
             p.az = Some(a.v);
             out.extend(self.pending.take());
@@ -307,6 +313,9 @@ impl VehicleAssembler {
                     }
                     self.counters.unmatched += 1;
                 }
+                if let Some(prev) = self.rates {
+                    self.learn_rate_period(t - prev.t);
+                }
                 let rates = [v[0], v[1], v[2]].map(f64::from);
                 let att = [v[3], v[4], v[5]].map(f64::from);
                 self.rates = Some(Stamped { t, v: (rates, att) });
@@ -374,6 +383,26 @@ impl VehicleAssembler {
         }
     }
 
+    /// The pairing tolerance: the configured one, or under half the rate period if shorter.
+    fn max_skew(&self) -> f64 {
+        self.rate_period
+            .map_or(self.cfg.max_skew_s, |p| self.cfg.max_skew_s.min(0.45 * p))
+    }
+
+    /// Smooth the interval between rate instants; a lost instant (a longer interval) does not
+    /// stretch it.
+    fn learn_rate_period(&mut self, dt: f64) {
+        if !(dt > 0.0 && dt < 1.0) {
+            return;
+        }
+        self.rate_period = Some(match self.rate_period {
+            None => dt,
+            Some(p) if dt < 1.5 * p => 0.9 * p + 0.1 * dt,
+            // Longer: a hole, or the stream slowed down; adapt slowly from below.
+            Some(p) => p * 1.02,
+        });
+    }
+
     /// New outputs, unless older than those held (a reordered message: counted, dropped).
     fn set_outputs(&mut self, t: f64, pwm: [u16; 16]) -> Option<TelemetrySample> {
         if self.outputs.is_some_and(|o| t < o.t) {
@@ -403,7 +432,8 @@ impl VehicleAssembler {
     fn try_emit(&mut self) -> Option<TelemetrySample> {
         let rates = self.rates?;
         let outputs = self.outputs?;
-        if self.rates_used || (rates.t - outputs.t).abs() > self.cfg.max_skew_s {
+        let max_skew = self.max_skew();
+        if self.rates_used || (rates.t - outputs.t).abs() > max_skew {
             return None;
         }
         self.rates_used = true;
@@ -411,7 +441,7 @@ impl VehicleAssembler {
         self.counters.samples += 1;
         let az = self
             .az
-            .filter(|a| (a.t - rates.t).abs() <= self.cfg.max_skew_s)
+            .filter(|a| (a.t - rates.t).abs() <= max_skew)
             .map(|a| a.v);
         Some(TelemetrySample {
             t: rates.t,
@@ -535,6 +565,27 @@ mod tests {
         assert_eq!((got[0].t, got[0].pwm[0]), (1.04, 1600));
         assert_eq!(a.counters.out_of_order, 3);
         assert_eq!(a.counters.unmatched, 0);
+    }
+
+    #[test]
+    fn at_100_hz_rates_never_pair_with_the_next_instants_outputs() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        // 100 Hz, outputs stamped with their own instant, in step.
+        for k in 0..20 {
+            let ms = 1000 + 10 * k;
+            assert_eq!(feed(&mut a, &[attitude(ms), outputs(ms, 1500)]).len(), 1);
+        }
+        // The outputs of one instant are lost; rates wait and the next instant's outputs
+        // (10 ms later, inside the 15 ms default) must not be taken for them.
+        let got = feed(
+            &mut a,
+            &[attitude(1200), attitude(1210), outputs(1210, 1600)],
+        );
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].t, 1.21);
+        let got = feed(&mut a, &[attitude(1220), outputs(1230, 1700)]);
+        assert!(got.is_empty(), "paired with a neighbour: {got:?}");
+        assert_eq!(a.counters.unmatched, 1);
     }
 
     #[test]
