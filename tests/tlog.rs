@@ -113,6 +113,21 @@ fn flipped_bytes_are_counted_and_the_rest_survives() {
 }
 
 #[test]
+fn a_garbage_first_timestamp_does_not_become_the_logs_clock() {
+    let mut bytes = clean_log();
+    let (good, _) = read_all(&bytes);
+    // The first record's timestamp: years off.
+    bytes[..8].copy_from_slice(&u64::MAX.to_be_bytes());
+    let (frames, c) = read_all(&bytes);
+    assert_eq!(frames.len(), good.len(), "{c}");
+    // The reader held its (garbage) clock for the frames before three agreed on the real
+    // one, counted each, then went on with the log's own stamps.
+    assert!(c.repaired_ts >= 1 && c.repaired_ts <= 2, "{c}");
+    let n = c.repaired_ts as usize + 1;
+    assert_eq!(&frames[n..], &good[n..], "{c}");
+}
+
+#[test]
 fn truncated_tail_is_counted_not_fatal() {
     let bytes = clean_log();
     let (good, _) = read_all(&bytes);

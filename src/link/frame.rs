@@ -42,6 +42,9 @@ pub struct FrameCounters {
     pub parse_error: u64,
     /// A record cut off by the end of the input.
     pub truncated: u64,
+    /// Tlogs: good frames whose timestamp was implausible (a day or more off the log's clock)
+    /// and was replaced by the clock's.
+    pub repaired_ts: u64,
 }
 
 impl FrameCounters {
@@ -57,6 +60,7 @@ impl FrameCounters {
         self.unknown_id += o.unknown_id;
         self.parse_error += o.parse_error;
         self.truncated += o.truncated;
+        self.repaired_ts += o.repaired_ts;
     }
 }
 
@@ -72,7 +76,11 @@ impl std::fmt::Display for FrameCounters {
             self.unknown_id,
             self.parse_error,
             self.truncated
-        )
+        )?;
+        if self.repaired_ts > 0 {
+            write!(f, " · repaired timestamps {}", self.repaired_ts)?;
+        }
+        Ok(())
     }
 }
 

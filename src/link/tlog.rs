@@ -17,6 +17,8 @@ const CHUNK: usize = 64 * 1024;
 /// Two records more than a day apart cannot be neighbours in one log: such a "timestamp" is
 /// garbage met while resynchronising.
 const MAX_TS_JUMP_US: u64 = 86_400_000_000;
+/// Good frames in a row that move the reader's clock to theirs.
+const REANCHOR_FRAMES: u32 = 3;
 
 pub struct TlogReader<R: Read> {
     src: R,
@@ -26,6 +28,9 @@ pub struct TlogReader<R: Read> {
     syncing: bool,
     tail_cut: bool,
     last_ts: Option<u64>,
+    /// A clock that good frames keep agreeing on while it disagrees with `last_ts`: its last
+    /// stamp and how many frames in a row.
+    ts_candidate: Option<(u64, u32)>,
     /// Bytes dropped from the front of `buf` so far (for progress).
     base: u64,
     pub counters: FrameCounters,
@@ -47,6 +52,7 @@ impl<R: Read> TlogReader<R> {
             syncing: false,
             tail_cut: false,
             last_ts: None,
+            ts_candidate: None,
             base: 0,
             counters: FrameCounters::default(),
         }
@@ -89,6 +95,30 @@ impl<R: Read> TlogReader<R> {
         }
         self.counters.skipped_bytes += 1;
         self.pos += 1;
+    }
+
+    /// A good frame's timestamp: kept when plausible against the clock; otherwise the clock's
+    /// (counted as repaired), until `REANCHOR_FRAMES` good frames in a row agree on the new
+    /// one (the first record's stamp was the garbage, or the logger's clock was set): then
+    /// the log goes on with it.
+    fn checked_ts(&mut self, ts: u64) -> u64 {
+        if self.plausible_ts(ts) {
+            self.ts_candidate = None;
+            self.last_ts = Some(ts);
+            return ts;
+        }
+        let agreeing = match self.ts_candidate {
+            Some((c, n)) if ts.abs_diff(c) <= MAX_TS_JUMP_US => n + 1,
+            _ => 1,
+        };
+        if agreeing >= REANCHOR_FRAMES {
+            self.ts_candidate = None;
+            self.last_ts = Some(ts);
+            return ts;
+        }
+        self.ts_candidate = Some((ts, agreeing));
+        self.counters.repaired_ts += 1;
+        self.last_ts.unwrap_or(ts)
     }
 
     fn plausible_ts(&self, ts: u64) -> bool {
@@ -138,13 +168,7 @@ impl<R: Read> TlogReader<R> {
                     self.syncing = false;
                     self.tail_cut = false;
                     self.counters.frames += 1;
-                    // A garbage timestamp on a good frame: keep the clock monotone-ish.
-                    let ts = if self.plausible_ts(ts) {
-                        ts
-                    } else {
-                        self.last_ts.unwrap_or(ts)
-                    };
-                    self.last_ts = Some(ts);
+                    let ts = self.checked_ts(ts);
                     return Ok(Some((ts, *f)));
                 }
                 Parsed::UnknownId(n) => {
