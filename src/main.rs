@@ -717,9 +717,10 @@ fn monitor(
     }
     if let Some(a) = &files.alerts {
         outln!(
-            "alerts: {} STATUSTEXT sent, {} dropped by the rate limit",
+            "alerts: {} STATUSTEXT queued for sending, {} dropped by the rate limit; {} frames found no planner to send to (none connected yet, or the link failed)",
             a.texts_sent,
-            a.texts_dropped
+            a.texts_dropped,
+            a.frames_unsent
         );
     }
     Ok(())

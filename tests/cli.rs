@@ -150,4 +150,17 @@ fn plot_writes_valid_svg() {
     let svg = std::fs::read_to_string(dir.join("paper-fig5-gaussian.svg")).unwrap();
     assert!(svg.starts_with("<?xml") && svg.trim_end().ends_with("</svg>"));
     assert!(svg.matches("<polyline").count() >= 2 * (1 + 5 * 3));
+    // A name with XML's special characters is escaped, so the file stays valid XML.
+    let scenario = dir.join("R&D <1>.toml");
+    std::fs::write(&scenario, VALID).unwrap();
+    let (code, _, err) = ahcmon(&[
+        "eval",
+        scenario.to_str().unwrap(),
+        "--plot",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let svg = std::fs::read_to_string(dir.join("R&D <1>.svg")).unwrap();
+    assert!(svg.contains("R&amp;D &lt;1&gt;"), "title not escaped");
+    assert!(!svg.contains("R&D"), "raw name in the SVG");
 }

@@ -14,6 +14,10 @@ use thiserror::Error;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
+/// How long a sender waits for an outgoing TCP connection before dropping the frame (it tries
+/// again a second later).
+const SEND_CONNECT_TIMEOUT: Duration = Duration::from_millis(100);
+
 #[derive(Debug, Error)]
 pub enum ConnError {
     #[error(
@@ -96,6 +100,8 @@ enum Transport {
         stream: Option<TcpStream>,
         /// Why the first connection attempt failed (the link retries every second).
         refused: Option<String>,
+        /// A sender tries to reconnect at most this often (see `send`).
+        next_attempt: tokio::time::Instant,
     },
     /// Read as a byte stream through our own framer, like TCP, so that bad CRCs, resyncs
     /// and unknown ids on a radio link are counted too.
@@ -172,6 +178,7 @@ impl Link {
                     addr: *a,
                     stream,
                     refused,
+                    next_attempt: tokio::time::Instant::now(),
                 }
             }
             ConnSpec::Serial(dev, baud) => {
@@ -313,22 +320,37 @@ impl Link {
                 },
                 None => Ok(false),
             },
+            // A sender never waits for its peer: the monitor's loop (estimators, decisions,
+            // ctrl-c) must go on while no planner is there. Frames until then are not sent.
             Transport::TcpIn { listener, stream } => {
                 if stream.is_none() {
-                    // A sender waits for its first client.
-                    let (s, _) = listener.accept().await.map_err(io)?;
-                    *stream = Some(s);
+                    match tokio::time::timeout(Duration::ZERO, listener.accept()).await {
+                        Ok(Ok((s, _))) => *stream = Some(s),
+                        Ok(Err(e)) => return Err(io(e)),
+                        Err(_) => return Ok(false),
+                    }
                 }
                 Ok(write_or_drop(stream, frame).await)
             }
-            Transport::TcpOut { addr, stream, .. } => {
+            Transport::TcpOut {
+                addr,
+                stream,
+                next_attempt,
+                ..
+            } => {
                 if stream.is_none() {
-                    match TcpStream::connect(*addr).await {
-                        Ok(s) => {
+                    let now = tokio::time::Instant::now();
+                    if now < *next_attempt {
+                        return Ok(false);
+                    }
+                    *next_attempt = now + Duration::from_secs(1);
+                    let connect = TcpStream::connect(*addr);
+                    match tokio::time::timeout(SEND_CONNECT_TIMEOUT, connect).await {
+                        Ok(Ok(s)) => {
                             *stream = Some(s);
                             self.reconnects += 1;
                         }
-                        Err(_) => return Ok(false),
+                        _ => return Ok(false),
                     }
                 }
                 Ok(write_or_drop(stream, frame).await)
@@ -371,6 +393,36 @@ mod tests {
             // Other links never wait for a connection.
             let udp: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
             assert_eq!(Link::open(udp).await.expect("binds").not_connected(), None);
+        });
+    }
+
+    #[test]
+    fn tcp_senders_never_wait_for_their_peer() {
+        runtime().block_on(async {
+            let limit = Duration::from_secs(1);
+            // tcpin with no client yet: the frame is not sent, at once.
+            let spec: ConnSpec = "tcpin:127.0.0.1:0".parse().expect("spec");
+            let mut server = Link::open(spec).await.expect("listens");
+            let addr = server.local_addr().expect("addr");
+            let sent = tokio::time::timeout(limit, server.send(b"x")).await;
+            assert!(matches!(sent, Ok(Ok(false))), "{sent:?}");
+            // Once a planner connects, frames go to it.
+            let mut client = TcpStream::connect(addr).await.expect("connect");
+            let sent = tokio::time::timeout(limit, server.send(b"hello")).await;
+            assert!(matches!(sent, Ok(Ok(true))), "{sent:?}");
+            let mut got = [0u8; 5];
+            client.read_exact(&mut got).await.expect("read");
+            assert_eq!(&got, b"hello");
+            // tcpout to nobody: not sent, and not retried within the second.
+            let closed = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+            let port = closed.local_addr().expect("addr").port();
+            drop(closed);
+            let spec: ConnSpec = format!("tcpout:127.0.0.1:{port}").parse().expect("spec");
+            let mut out = Link::open(spec).await.expect("opens");
+            for _ in 0..3 {
+                let sent = tokio::time::timeout(limit, out.send(b"x")).await;
+                assert!(matches!(sent, Ok(Ok(false))), "{sent:?}");
+            }
         });
     }
 

@@ -298,8 +298,10 @@ async fn send_alerts(
         return;
     };
     a.tick(clock.elapsed().as_secs_f64());
-    for frame in a.outbox.drain(..) {
-        let _ = link.send(&frame).await;
+    for frame in std::mem::take(&mut a.outbox) {
+        if !matches!(link.send(&frame).await, Ok(true)) {
+            a.frames_unsent += 1;
+        }
     }
 }
 

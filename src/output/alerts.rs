@@ -18,9 +18,13 @@ use std::collections::{BTreeMap, VecDeque};
 
 /// MAV_COMP_ID_ONBOARD_COMPUTER.
 pub const ALERT_COMPID: u8 = 191;
-/// At most one STATUSTEXT per vehicle this often (s); more wait in a short queue.
+/// At most one STATUSTEXT per vehicle this often (s); more wait in a short queue. When it is
+/// full the least severe text goes; faults (ERROR, CRITICAL) are dropped only past a hard cap.
 const TEXT_INTERVAL_S: f64 = 1.0;
 const TEXT_QUEUE: usize = 8;
+const TEXT_QUEUE_HARD: usize = 64;
+/// STATUSTEXT's text field (bytes).
+const TEXT_BYTES: usize = 50;
 /// NAMED_VALUE_FLOAT and AHC_ESTIMATE per actuator this often (s).
 const VALUE_INTERVAL_S: f64 = 0.5;
 
@@ -30,6 +34,8 @@ struct Latest {
     ukf: AhcEstimate,
     esmf: AhcEstimate,
     channel: u8,
+    /// The actuator's index in its vehicle's profile (AHC_ESTIMATE.actuator).
+    index: u8,
 }
 
 #[derive(Debug, Default)]
@@ -48,7 +54,10 @@ pub struct Alerts {
     last_values: f64,
     /// STATUSTEXT dropped because the queue was full.
     pub texts_dropped: u64,
+    /// STATUSTEXT put in the outbox.
     pub texts_sent: u64,
+    /// Frames of the outbox the link could not deliver (counted by the sender).
+    pub frames_unsent: u64,
 }
 
 /// `AHC swash2 LOE 41% UKF+ESMF`: what the planner shows (≤ 50 characters).
@@ -64,6 +73,12 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
         })
         .collect();
     let by = by.join("+");
+    // The actuator's name is what gives way when the text is too long, not the class.
+    let fit = |what: &str, by: &str| {
+        let tail = format!(" {what} {by}");
+        let room = TEXT_BYTES.saturating_sub("AHC ".len() + tail.trim_end().len());
+        format!("AHC {}{}", cut_bytes(who, room), tail.trim_end())
+    };
     let (sev, text) = match d.event {
         Event::Fault | Event::Changed => {
             let (sev, what) = match d.class {
@@ -81,24 +96,28 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
                     (MavSeverity::MAV_SEVERITY_ERROR, "output off".into())
                 }
             };
-            (sev, format!("AHC {who} {what} {by}"))
+            (sev, fit(&what, &by))
         }
-        Event::Cleared => (
-            MavSeverity::MAV_SEVERITY_NOTICE,
-            format!("AHC {who} cleared"),
-        ),
+        Event::Cleared => (MavSeverity::MAV_SEVERITY_NOTICE, fit("cleared", "")),
         Event::ExcitationLow => return None,
         Event::FilterReset => (MavSeverity::MAV_SEVERITY_WARNING, "AHC filter reset".into()),
         Event::LinkLost | Event::LinkRestored => return None,
     };
-    let text: String = text.trim().chars().take(50).collect();
-    Some((sev, text))
+    Some((sev, cut_bytes(text.trim(), TEXT_BYTES).to_string()))
 }
 
+/// The longest prefix of `s` of at most `max` bytes that ends on a character boundary.
+fn cut_bytes(s: &str, max: usize) -> &str {
+    let mut end = max.min(s.len());
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    &s[..end]
+}
+
+/// NAMED_VALUE_FLOAT's name (10 bytes): `g_` / `d_` and as much of the actuator's name as fits.
 fn short_name(prefix: &str, name: &str) -> String {
-    let mut s = format!("{prefix}_{name}");
-    s.truncate(10);
-    s
+    cut_bytes(&format!("{prefix}_{name}"), 10).to_string()
 }
 
 fn state_of(d: &Decision) -> Option<AhcState> {
@@ -136,11 +155,21 @@ impl Alerts {
         }
         if let Some(item) = statustext(d) {
             let q = self.text_queue.entry(d.sysid).or_default();
-            if q.len() >= TEXT_QUEUE {
-                q.pop_front();
-                self.texts_dropped += 1;
-            }
             q.push_back(item);
+            if q.len() > TEXT_QUEUE {
+                // MAV_SEVERITY: lower is more severe. The least severe goes (the oldest of
+                // those), unless all are faults and the hard cap is not reached.
+                let least = (0..q.len())
+                    .rev()
+                    .max_by_key(|&i| q[i].0 as u8)
+                    .unwrap_or(0);
+                let is_fault = (q[least].0 as u8) <= MavSeverity::MAV_SEVERITY_ERROR as u8;
+                if !is_fault || q.len() > TEXT_QUEUE_HARD {
+                    let drop_at = if is_fault { 0 } else { least };
+                    q.remove(drop_at);
+                    self.texts_dropped += 1;
+                }
+            }
             self.flush_texts();
         }
     }
@@ -161,6 +190,7 @@ impl Alerts {
                     ukf: est[0][j],
                     esmf: est[1][j],
                     channel: a.channel,
+                    index: j as u8,
                 },
             );
         }
@@ -222,7 +252,7 @@ impl Alerts {
             self.last_values = now;
             let latest: Vec<((u8, String), Latest)> =
                 self.latest.iter().map(|(k, v)| (k.clone(), *v)).collect();
-            for (index, ((sysid, name), l)) in latest.into_iter().enumerate() {
+            for ((sysid, name), l) in latest {
                 let time_boot_ms = (l.t * 1e3).max(0.0) as u32;
                 for (prefix, value) in [("g", l.ukf.gamma), ("d", l.ukf.delta)] {
                     let msg = MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
@@ -239,7 +269,7 @@ impl Alerts {
                     .unwrap_or(AhcState::AHC_STATE_HEALTHY);
                 let msg = MavMessage::AHC_ESTIMATE(AHC_ESTIMATE_DATA {
                     time_boot_ms,
-                    actuator: index as u8,
+                    actuator: l.index,
                     channel: l.channel,
                     state,
                     name: name.as_str().into(),
@@ -277,8 +307,97 @@ mod tests {
         let (sev, text) = statustext(&d).unwrap();
         assert_eq!(text, "AHC swash2 LOE 41% UKF+ESMF");
         assert_eq!(sev, MavSeverity::MAV_SEVERITY_CRITICAL);
+        // A long name gives way, the class and the filters stay; bytes, not characters, and
+        // never half a character.
         d.actuator = Some("a_very_long_actuator_name_that_goes_on_and_on".into());
-        assert!(statustext(&d).unwrap().1.len() <= 50);
+        let (_, text) = statustext(&d).unwrap();
+        assert!(text.len() <= 50, "{text}");
+        assert!(text.starts_with("AHC a_very_long") && text.ends_with(" LOE 41% UKF+ESMF"));
+        d.actuator = Some("höhenruder_links_äußeres_ruder_über_alles".into());
+        let (_, text) = statustext(&d).unwrap();
+        assert!(
+            text.len() <= 50 && text.ends_with(" LOE 41% UKF+ESMF"),
+            "{text}"
+        );
+        assert_eq!(short_name("g", "servo1_ä"), "g_servo1_");
+        assert_eq!(short_name("g", "motor1"), "g_motor1");
+    }
+
+    #[test]
+    fn a_full_text_queue_drops_the_least_severe_never_a_fault() {
+        let mut a = Alerts::default();
+        a.tick(0.0);
+        let decision = |event, actuator: &str, class| {
+            let mut d = Decision::monitor(1.0, 1, event, "");
+            d.actuator = Some(actuator.into());
+            d.class = class;
+            d.gamma = Some(0.5);
+            d.filters = vec!["mit-ukf"];
+            d
+        };
+        // One text goes at once; then a fault and a flood of notices and resets.
+        a.on_decision(&decision(Event::Cleared, "motor1", None));
+        a.on_decision(&decision(
+            Event::Fault,
+            "motor2",
+            Some(FaultClass::LossOfEffectiveness),
+        ));
+        for k in 0..20 {
+            let e = if k % 2 == 0 {
+                Event::Cleared
+            } else {
+                Event::FilterReset
+            };
+            a.on_decision(&decision(e, "motor3", None));
+        }
+        assert_eq!(a.texts_dropped, 21 - TEXT_QUEUE as u64);
+        let q = &a.text_queue[&1];
+        assert_eq!(q.len(), TEXT_QUEUE);
+        assert!(
+            q.iter().any(|(_, t)| t.starts_with("AHC motor2 LOE")),
+            "{q:?}"
+        );
+        // Faults alone grow the queue past the soft cap rather than being dropped.
+        for _ in 0..20 {
+            a.on_decision(&decision(Event::Fault, "motor4", Some(FaultClass::Stuck)));
+        }
+        let q = &a.text_queue[&1];
+        assert!(
+            q.iter()
+                .filter(|(s, _)| *s == MavSeverity::MAV_SEVERITY_CRITICAL)
+                .count()
+                == 21
+        );
+    }
+
+    #[test]
+    fn ahc_estimate_carries_the_profile_index_of_each_vehicle() {
+        use crate::link::frame::{Parsed, parse};
+        let quad = Profile::resolve("quad-x").unwrap();
+        let plane = Profile::resolve("plane").unwrap();
+        let est = [AhcEstimate::default(); 8];
+        let mut a = Alerts::default();
+        a.on_estimates(1.0, 1, &[&est[..4], &est[..4]], &quad);
+        a.on_estimates(1.0, 2, &[&est[..3], &est[..3]], &plane);
+        a.tick(1.0);
+        let mut seen = Vec::new();
+        for frame in &a.outbox {
+            if let Parsed::Frame(f, _) = parse(frame)
+                && let MavMessage::AHC_ESTIMATE(m) = f.msg
+            {
+                let name = m.name.to_str().unwrap().trim_end_matches('\0').to_string();
+                seen.push((f.sysid, name, m.actuator));
+            }
+        }
+        seen.sort();
+        let mut expected = Vec::new();
+        for (p, sysid) in [(&quad, 1u8), (&plane, 2)] {
+            for (j, a) in p.actuators.iter().enumerate() {
+                expected.push((sysid, a.name.clone(), j as u8));
+            }
+        }
+        expected.sort();
+        assert_eq!(seen, expected);
     }
 
     #[test]

@@ -19,6 +19,25 @@ struct Panel<'a> {
     pick: Pick,
 }
 
+/// Text for an SVG text node: names come from files and profiles (`R&D.tlog`).
+fn xml(s: &str) -> std::borrow::Cow<'_, str> {
+    if !s.contains(['&', '<', '>', '"', '\'']) {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    let mut out = String::with_capacity(s.len() + 16);
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c => out.push(c),
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
 fn finite_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite()) {
@@ -68,7 +87,8 @@ pub fn render(run: &Run) -> String {
 <svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{height}" viewBox="0 0 {W} {height}" font-family="sans-serif" font-size="12">
 <rect width="100%" height="100%" fill="white"/>
 <text x="{LEFT}" y="22" font-size="15">{} (seed {})</text>"#,
-        run.scenario, run.seed
+        xml(&run.scenario),
+        run.seed
     );
     let t_end = run.truth.t.last().copied().unwrap_or(1.0);
     for (pi, panel) in panels.iter().enumerate() {
@@ -266,7 +286,8 @@ impl PlotRecorder {
             r#"<?xml version="1.0" encoding="UTF-8"?>
 <svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{height}" viewBox="0 0 {W} {height}" font-family="sans-serif" font-size="12">
 <rect width="100%" height="100%" fill="white"/>
-<text x="{LEFT}" y="22" font-size="15">{title}</text>"#
+<text x="{LEFT}" y="22" font-size="15">{}</text>"#,
+            xml(title)
         );
         if self.traces.is_empty() {
             let _ = writeln!(
@@ -316,8 +337,9 @@ impl PlotRecorder {
                 let _ = writeln!(
                     out,
                     r##"<rect x="{LEFT}" y="{y0}" width="{plot_w}" height="{panel_h}" fill="none" stroke="#888"/>
-<text x="{LEFT}" y="{}">sysid {sysid} · {name} (ch {channel}) · {which}</text>"##,
-                    y0 - 6.0
+<text x="{LEFT}" y="{}">sysid {sysid} · {} (ch {channel}) · {which}</text>"##,
+                    y0 - 6.0,
+                    xml(name)
                 );
                 for k in 0..=2 {
                     let v = lo + (hi - lo) * k as f64 / 2.0;
@@ -367,10 +389,11 @@ impl PlotRecorder {
                     let (x, _) = map(*t, lo);
                     let _ = writeln!(
                         out,
-                        r##"<line x1="{x:.1}" x2="{x:.1}" y1="{y0}" y2="{}" stroke="#d62728" stroke-width="1"/><text x="{:.1}" y="{}" fill="#d62728" font-size="10">{label}</text>"##,
+                        r##"<line x1="{x:.1}" x2="{x:.1}" y1="{y0}" y2="{}" stroke="#d62728" stroke-width="1"/><text x="{:.1}" y="{}" fill="#d62728" font-size="10">{}</text>"##,
                         y0 + panel_h,
                         x + 2.0,
-                        y0 + 10.0
+                        y0 + 10.0,
+                        xml(label)
                     );
                 }
                 let lx = LEFT + plot_w + 12.0;

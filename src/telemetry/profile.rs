@@ -256,6 +256,18 @@ impl Profile {
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
             return Err(format!("rate_hz must be positive (got {})", self.rate_hz));
         }
+        // Names key the decisions, the estimates and the planner's values.
+        for (j, a) in self.actuators.iter().enumerate() {
+            if a.name.trim().is_empty() || a.name.chars().any(char::is_control) {
+                return Err(format!(
+                    "actuator {}: a name must be non-empty printable text",
+                    j + 1
+                ));
+            }
+            if self.actuators[..j].iter().any(|b| b.name == a.name) {
+                return Err(format!("actuator name `{}` is used twice", a.name));
+            }
+        }
         let m = &self.model;
         let numbers = m
             .damping
@@ -545,6 +557,24 @@ mod tests {
         assert!(e.contains("wobble"), "{e}");
         let line: usize = e.split(':').nth(1).unwrap().parse().unwrap();
         assert!(line > 1);
+    }
+
+    #[test]
+    fn actuator_names_are_unique_and_printable() {
+        let text = include_str!("../../replay/profiles/quad-x.toml");
+        let twice = text.replacen("name = \"motor2\"", "name = \"motor1\"", 1);
+        let e = Profile::from_toml(&twice, "x.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`motor1` is used twice"), "{e}");
+        let empty = text.replacen("name = \"motor3\"", "name = \" \"", 1);
+        let e = Profile::from_toml(&empty, "x.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("actuator 3"), "{e}");
+        // Any printable text is fine (the planner's 10-byte names are cut on a character).
+        let umlaut = text.replacen("name = \"motor4\"", "name = \"höhe_ä\"", 1);
+        assert!(Profile::from_toml(&umlaut, "x.toml").is_ok());
     }
 
     #[test]
