@@ -634,7 +634,7 @@ fn monitor(
         files.alerts = Some(ahcmon::output::alerts::Alerts::default());
     }
     let rt = runtime()?;
-    let counters = rt.block_on(async {
+    let result = rt.block_on(async {
         let link = Link::open(spec.clone()).await?;
         let local = link.local_addr();
         let verb = match spec {
@@ -704,10 +704,21 @@ fn monitor(
             }
         }
         anyhow::Ok(counters)
-    })?;
-    if let Some(e) = files.error.take() {
-        return Err(anyhow::Error::new(e).context("writing JSON lines"));
-    }
+    });
+    // A write error is reported whatever else happened, after the summary when there is one.
+    let write_error = files
+        .error
+        .take()
+        .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
+    let counters = match result {
+        Ok(c) => c,
+        Err(e) => {
+            if let Some(w) = &write_error {
+                eprintln!("ahcmon: error: {w:#}");
+            }
+            return Err(e);
+        }
+    };
     out!("{}", summary::render(&monitor, &counters.link, &files.seen));
     if counters.backpressure_drops > 0 {
         outln!(
@@ -723,7 +734,7 @@ fn monitor(
             a.frames_unsent
         );
     }
-    Ok(())
+    write_error.map_or(Ok(()), Err)
 }
 
 fn calibrate(
@@ -912,9 +923,11 @@ fn replay(
     if progress {
         eprint!("\r{:60}\r", "");
     }
-    if let Some(e) = files.error.take() {
-        return Err(anyhow::Error::new(e).context("writing JSON lines"));
-    }
+    // Reported after the plot and the summary, which do not depend on the files.
+    let write_error = files
+        .error
+        .take()
+        .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
     if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
         let title = format!("ahcmon replay {}", file.display());
         std::fs::write(p, rec.render(&title))
@@ -930,7 +943,7 @@ fn replay(
         file.display(),
         replay_time.as_secs_f64()
     );
-    Ok(())
+    write_error.map_or(Ok(()), Err)
 }
 
 /// A mistake in how the command line combines things (exit code 2).

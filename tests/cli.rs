@@ -164,3 +164,25 @@ fn plot_writes_valid_svg() {
     assert!(svg.contains("R&amp;D &lt;1&gt;"), "title not escaped");
     assert!(!svg.contains("R&D"), "raw name in the SVG");
 }
+
+/// A decisions file that cannot be written (a full disk): said at once, the replay goes on to
+/// its summary, and the exit code is an error.
+#[test]
+fn a_full_disk_is_reported_and_the_summary_still_printed() {
+    if !std::path::Path::new("/dev/full").exists() {
+        return;
+    }
+    let tlog = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("replay/tlogs/sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let (code, out, err) = ahcmon(&[
+        "replay",
+        tlog.to_str().unwrap(),
+        "--headless",
+        "--decisions",
+        "/dev/full",
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("No space left on device"), "{err}");
+    assert!(out.contains("replayed "), "no summary: {out}");
+}

@@ -250,7 +250,15 @@ impl MonitorFiles {
     }
 
     fn keep(&mut self, r: std::io::Result<()>) {
+        let first = self.error.is_none() && r.is_err();
         keep_first(&mut self.error, r);
+        // Live, say it at once (a full disk should not wait for ctrl-c); the dashboard, which
+        // owns the terminal, shows it at exit.
+        if let (true, true, Some(e)) = (first, self.echo, &self.error) {
+            eprintln!(
+                "ahcmon: error writing JSON lines: {e}; the monitor goes on, the lines from now on are lost"
+            );
+        }
     }
 }
 
