@@ -542,8 +542,24 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
             Some(s) => Some(Link::open(s.clone()).await?),
             None => None,
         };
-        anyhow::Ok(fly(named, &opts, link.as_mut(), tlog.as_mut(), truth.as_mut()).await?)
+        let flight = fly(named, &opts, link.as_mut(), tlog.as_mut(), truth.as_mut());
+        // ctrl-c ends the flight with the files whole (the default would kill the process with
+        // the tlog's last records still buffered).
+        tokio::select! {
+            r = flight => anyhow::Ok(Some(r?)),
+            _ = tokio::signal::ctrl_c() => anyhow::Ok(None),
+        }
     })?;
+    let Some(report) = report else {
+        if let Some(w) = tlog.as_mut() {
+            w.flush().context("writing the tlog")?;
+        }
+        outln!(
+            "{}: interrupted; the files hold the flight up to now",
+            named.name
+        );
+        return Ok(());
+    };
     let list: Vec<String> = report
         .counts
         .iter()

@@ -471,3 +471,49 @@ fn serial_link_frames_and_counts_what_it_drops() {
         "{link}"
     );
 }
+
+/// ctrl-c while the simulator speaks to a link and writes a tlog: the tlog ends on a whole
+/// record (nothing left in the buffer, nothing cut) and the run says it was interrupted.
+#[test]
+fn sim_interrupted_leaves_a_whole_tlog() {
+    let dir = common::temp_dir("live_sim_interrupt");
+    let tlog = dir.join("cut.tlog");
+    let port = free_udp_port();
+    let child = Command::new(bin())
+        .args(["sim", "--scenario", "heli-demo", "--speed", "2", "--out"])
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .arg("--tlog")
+        .arg(&tlog)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("interrupted"), "{stdout}");
+    let bytes = std::fs::read(&tlog).unwrap();
+    let mut r = ahcmon::link::TlogReader::new(bytes.as_slice());
+    let mut frames = 0;
+    while r.next_frame().unwrap().is_some() {
+        frames += 1;
+    }
+    // About 1.5 s at twice real time, 50 Hz, several messages per instant.
+    assert!(frames > 200, "{frames} frames: {}", r.counters);
+    assert_eq!(
+        r.counters.truncated + r.counters.bad_crc + r.counters.resync,
+        0,
+        "{}",
+        r.counters
+    );
+}
