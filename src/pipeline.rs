@@ -90,6 +90,9 @@ struct Running {
     last_t: f64,
     est: [[AhcEstimate; MAX_ACTUATORS]; 2],
     decisions: Vec<Decision>,
+    /// Per filter: when its last reset was reported, and resets since (a filter failing step
+    /// after step is reported once a second, with the count).
+    reset_reported: [(f64, u64); 2],
 }
 
 enum Stage {
@@ -449,17 +452,25 @@ impl VehiclePipeline {
                     if out.is_err() {
                         self.counters.filter_errors += 1;
                         r.filters.reset(f);
-                        let d = Decision::monitor(
-                            s.t,
-                            self.sysid,
-                            Event::FilterReset,
-                            format!(
-                                "{} update failed; reset",
-                                crate::estimate::vehicle::FILTER_NAMES[f]
-                            ),
-                        );
-                        sink.decision(&d, &r.profile);
-                        self.counters.decisions += 1;
+                        // The fresh filter reads healthy at once: the diagnosis holds that
+                        // filter's alarms through a warm-up instead of clearing on it.
+                        r.diag.filter_reset(f, s.t);
+                        let (last, since) = &mut r.reset_reported[f];
+                        *since += 1;
+                        if s.t - *last >= 1.0 {
+                            let name = crate::estimate::vehicle::FILTER_NAMES[f];
+                            let detail = if *since > 1 {
+                                format!(
+                                    "{name} update failed; reset ({since} resets since the last report)"
+                                )
+                            } else {
+                                format!("{name} update failed; reset")
+                            };
+                            let d = Decision::monitor(s.t, self.sysid, Event::FilterReset, detail);
+                            sink.decision(&d, &r.profile);
+                            self.counters.decisions += 1;
+                            (*last, *since) = (s.t, 0);
+                        }
                     }
                     for j in 0..r.l {
                         r.est[f][j] = r.filters.ahc(f, j);
@@ -604,8 +615,18 @@ impl VehiclePipeline {
             let fit = match calibrate_scaled(&shifted, dt, &base) {
                 Ok(f) => f,
                 Err(e) => {
-                    sink.message(self.sysid, &format!("error: calibration failed: {e}"));
-                    self.stage = Stage::Failed;
+                    // The stretch was unusable (too short, too many holes): not the vehicle,
+                    // so the next stretch may do; a stretch the user chose is not retried.
+                    if self.cfg.calibrate_until.is_some() {
+                        sink.message(self.sysid, &format!("error: calibration failed: {e}"));
+                        self.stage = Stage::Failed;
+                    } else {
+                        sink.message(
+                            self.sysid,
+                            &format!("calibration failed: {e}; trying again on the next stretch"),
+                        );
+                        self.stage = Stage::Grounded;
+                    }
                     return;
                 }
             };
@@ -683,6 +704,7 @@ impl VehiclePipeline {
             rates_prev,
             exogenous,
             last_t: last.map_or(0.0, |l| l.0),
+            reset_reported: [(f64::NEG_INFINITY, 0); 2],
             est: [[AhcEstimate::default(); MAX_ACTUATORS]; 2],
             decisions: Vec::with_capacity(8),
         }));
@@ -717,6 +739,16 @@ mod tests {
     /// happens to sample k. Returns the pipeline, its messages and the samples lost while
     /// calibrating.
     fn fly_quad_with(damage: impl Fn(usize, bool) -> Damage) -> (VehiclePipeline, Messages, u64) {
+        fly_quad_for(2000, |k, stage| {
+            damage(k, matches!(stage, Stage::Running(_)))
+        })
+    }
+
+    /// `fly_quad_with` for `steps` samples, `damage` seeing the stage.
+    fn fly_quad_for(
+        steps: usize,
+        damage: impl Fn(usize, &Stage) -> Damage,
+    ) -> (VehiclePipeline, Messages, u64) {
         let profile = Profile::resolve("quad-x").unwrap();
         let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 3)).unwrap();
         let cfg = PipelineConfig {
@@ -727,10 +759,9 @@ mod tests {
         let mut sink = Messages::default();
         let info = VehicleInfo::default();
         let mut lost_in_stretch = 0;
-        for k in 0..2000 {
+        for k in 0..steps {
             let s = sim.step();
-            let estimating = matches!(pipeline.stage, Stage::Running(_));
-            let d = damage(k, estimating);
+            let d = damage(k, &pipeline.stage);
             if d == Damage::Lost {
                 let calibrating = matches!(pipeline.stage, Stage::Calibrating { .. });
                 lost_in_stretch += u64::from(calibrating);
@@ -795,6 +826,26 @@ mod tests {
         let warnings: Vec<_> = said.0.iter().filter(|m| m.contains("no PWM")).collect();
         assert_eq!(warnings.len(), 1, "{:?}", said.0);
         assert!(warnings[0].contains("channel 3"), "{}", warnings[0]);
+    }
+
+    /// A calibration stretch too holed to fit: said, and the next stretch calibrates.
+    #[test]
+    fn a_failed_calibration_is_tried_again_on_the_next_stretch() {
+        let (p, said, _) = fly_quad_for(3000, |k, stage| {
+            if matches!(stage, Stage::Calibrating { .. }) && k < 1300 && k % 25 != 0 {
+                Damage::Lost
+            } else {
+                Damage::Intact
+            }
+        });
+        let failed = said
+            .0
+            .iter()
+            .filter(|m| m.contains("calibration failed"))
+            .count();
+        assert_eq!(failed, 1, "{:?}", said.0);
+        assert!(matches!(p.stage, Stage::Running(_)), "{:?}", said.0);
+        assert!(p.counters.steps > 100, "{:?}", p.counters);
     }
 
     /// One sample in ten lost during the calibration stretch: every hole is counted and said

@@ -230,6 +230,10 @@ struct Channel {
     gain_gap: f64,
     /// The last step's detection ratio (statistic over its threshold).
     ratio: f64,
+    /// Until then the filter is warming up after a reset: its alarm is held as it was (a
+    /// fresh filter reads healthy, which is no evidence that a fault has gone) and its
+    /// CUSUM stays at zero (its transient is no evidence of a new one).
+    hold_until: f64,
 }
 
 /// The actuator-level state across filters.
@@ -533,6 +537,18 @@ impl Diagnoser {
         self.actuators[j].channels[filter].gain_gap
     }
 
+    /// Filter `f` was re-initialised at `t`: hold its alarms for a warm-up (see
+    /// `Channel::hold_until`).
+    pub fn filter_reset(&mut self, f: usize, t: f64) {
+        let until = t + self.params.warmup_s;
+        for st in &mut self.actuators {
+            let ch = &mut st.channels[f];
+            ch.hold_until = until;
+            ch.cusum = 0.0;
+            ch.below = 0.0;
+        }
+    }
+
     pub fn active(&self, j: usize) -> Option<FaultClass> {
         self.actuators[j].active
     }
@@ -640,7 +656,7 @@ impl Diagnoser {
                     .max(explained[2][f][j].abs() / p.gain_threshold);
                 ch.ratio = ratio;
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
-                if !warm {
+                if !warm || t < ch.hold_until {
                     ch.cusum = 0.0;
                     continue;
                 }
@@ -671,8 +687,15 @@ impl Diagnoser {
             // Gating: say once when gain and bias cannot be told apart (and again after the
             // command has been exciting in between).
             let st = &self.actuators[j];
-            let sigma_gamma = st.channels[0].last.block[0].max(0.0).sqrt();
-            let low = st.u.var.sqrt() < p.excitation_min_std || sigma_gamma > p.sigma_gamma_max;
+            // A NaN variance (a failing filter) is no evidence of excitation: it gates.
+            let var_gamma = st.channels[0].last.block[0];
+            let sigma_gamma = if var_gamma.is_nan() {
+                f64::NAN
+            } else {
+                var_gamma.max(0.0).sqrt()
+            };
+            let low =
+                !(st.u.var.sqrt() >= p.excitation_min_std && sigma_gamma <= p.sigma_gamma_max);
             let st = &mut self.actuators[j];
             st.low_for = if low { st.low_for + self.dt } else { 0.0 };
             if !low {
@@ -700,6 +723,7 @@ impl Diagnoser {
                 let st = &mut self.actuators[j];
                 st.active = None;
                 st.active_filters = 0;
+                st.class_candidate = None;
                 continue;
             }
             if filters == 0 {
@@ -734,11 +758,14 @@ impl Diagnoser {
                     let st = &mut self.actuators[j];
                     st.active = Some(c);
                     st.active_filters = filters;
+                    st.class_candidate = None;
                 }
                 (Some(prev), c) => {
                     // A class once found stays until the excitation allows another, and a new
-                    // one must hold for a while.
-                    let mut c = if c == FaultClass::Unclassified {
+                    // one must hold for a while. The class is read from the MIT-UKF: while it
+                    // warms up after a reset, its estimates say nothing about the class.
+                    let ukf_warming = t < self.actuators[j].channels[0].hold_until;
+                    let mut c = if c == FaultClass::Unclassified || ukf_warming {
                         prev
                     } else {
                         c
@@ -1168,6 +1195,80 @@ mod tests {
         lower.diagnosis.gain_threshold = Some(0.085);
         let (_, _, decided) = run(&lower, &smaller, 0.05);
         assert_eq!(decided.len(), 1, "{decided:?}");
+    }
+
+    #[test]
+    fn a_filter_reset_neither_clears_a_fault_nor_raises_one() {
+        // Quad X, motor 2 at gamma 0.6 in the MIT-UKF only (the set filter's bounds say
+        // nothing); decided. Then the MIT-UKF fails and is reset: it reads healthy (gamma 1)
+        // while warming up, with a wild transient on motor 3. Neither clears the fault nor
+        // raises a new one during the warm-up; if the fresh filter still reads healthy after
+        // it, the fault clears as any would.
+        let p = Profile::resolve("quad-x").unwrap();
+        let params = DiagnosisParams::default();
+        let healthy = healthy_estimate(0.02);
+        let mut d = Diagnoser::new(params, 1, &p, 0.02);
+        let mut faulty = [healthy; 4];
+        faulty[1].gamma = 0.6;
+        faulty[1].gamma_lo = 0.55;
+        faulty[1].gamma_hi = 0.65;
+        let wide = [AhcEstimate {
+            gamma_lo: -1.0,
+            gamma_hi: 3.0,
+            delta_lo: -1.0,
+            delta_hi: 1.0,
+            gamma: 1.0,
+            ..Default::default()
+        }; 4];
+        let mut out = vec![];
+        let mut events = vec![];
+        let u = |t: f64| [0.5 + 0.2 * (t * 4.0).sin(); 4];
+        let mut t = 0.0;
+        while t < 12.0 {
+            d.update(t, &u(t), &[&faulty, &wide], &mut out);
+            events.extend(out.drain(..).map(|x| (x.event, x.actuator)));
+            t += 0.02;
+        }
+        assert!(
+            events.contains(&(Event::Fault, Some("motor2".into()))),
+            "{events:?}"
+        );
+        events.clear();
+        let reset_at = t;
+        d.filter_reset(0, reset_at);
+        let mut transient = [healthy; 4];
+        transient[2].gamma = 0.2;
+        transient[2].gamma_lo = 0.15;
+        transient[2].gamma_hi = 0.25;
+        while t < reset_at + params.warmup_s - 0.1 {
+            let est = if t < reset_at + 1.0 {
+                &transient
+            } else {
+                &[healthy; 4]
+            };
+            d.update(t, &u(t), &[est, &wide], &mut out);
+            events.extend(out.drain(..).map(|x| (x.event, x.actuator)));
+            t += 0.02;
+        }
+        assert!(events.is_empty(), "during the warm-up: {events:?}");
+        assert_eq!(d.active(1), Some(FaultClass::LossOfEffectiveness));
+        while t < reset_at + params.warmup_s + params.clear_s + 1.0 {
+            d.update(t, &u(t), &[&[healthy; 4], &wide], &mut out);
+            events.extend(out.drain(..).map(|x| (x.event, x.actuator)));
+            t += 0.02;
+        }
+        // (Before it clears, the class may change as the estimate leaves the fault, as after
+        // any fault's end.)
+        assert_eq!(
+            events.last(),
+            Some(&(Event::Cleared, Some("motor2".into())))
+        );
+        assert!(
+            events
+                .iter()
+                .all(|(e, a)| *e != Event::Fault && a.as_deref() == Some("motor2")),
+            "{events:?}"
+        );
     }
 
     #[test]
