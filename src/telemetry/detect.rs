@@ -113,6 +113,9 @@ pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
     }
     let mut profile = Profile::resolve(name)?;
     let mapped = apply_params(&mut profile, info);
+    if mapped > 0 {
+        warnings.extend(mapping_warnings(&profile, mapped, sysid));
+    }
     let source = format!(
         "{name} (from HEARTBEAT {mav_type:?}{}{})",
         if frame_type.is_some() {
@@ -133,6 +136,30 @@ pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
     })
 }
 
+/// What a partial set of `SERVOn_FUNCTION` parameters leaves doubtful: actuators still on
+/// the profile's default output, and outputs two actuators now share.
+fn mapping_warnings(profile: &Profile, mapped: usize, sysid: u8) -> Vec<String> {
+    let mut out = Vec::new();
+    if mapped < profile.actuators.len() {
+        out.push(format!(
+            "sysid {sysid}: SERVOn_FUNCTION gave the output of {mapped} of {} actuators; the others keep the profile's default channel; --profile overrides",
+            profile.actuators.len()
+        ));
+    }
+    for (j, a) in profile.actuators.iter().enumerate() {
+        if let Some(b) = profile.actuators[..j]
+            .iter()
+            .find(|b| b.channel == a.channel)
+        {
+            out.push(format!(
+                "sysid {sysid}: {} and {} are both on output {}: the parameters do not say where one of them is; pass --profile FILE",
+                b.name, a.name, a.channel
+            ));
+        }
+    }
+    out
+}
+
 /// Map the profile's actuators to outputs and PWM ranges from ArduPilot's `SERVOn_FUNCTION`,
 /// `SERVOn_MIN/TRIM/MAX/REVERSED` and (motors) `MOT_PWM_MIN/MAX`. Returns how many actuators
 /// were mapped from parameters.
@@ -144,7 +171,9 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
         let function = ardupilot_function(a.role, *index);
         *index += 1;
         let Some(function) = function else { continue };
-        let channel = (1..=16u8).find(|n| {
+        // SERVO1..32 (outputs past 16 come in SERVO_OUTPUT_RAW port 1, which is not read:
+        // their samples are then counted as missing an output, not read from a wrong one).
+        let channel = (1..=32u8).find(|n| {
             info.param(&format!("SERVO{n}_FUNCTION"))
                 .is_some_and(|f| f as u32 == function)
         });
@@ -178,4 +207,61 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
         }
     }
     mapped
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::dialects::ahcmon::MavAutopilot;
+
+    fn info(mav_type: MavType, params: &[(&str, f32)]) -> VehicleInfo {
+        VehicleInfo {
+            sysid: 1,
+            compid: Some(1),
+            mav_type: Some(mav_type),
+            autopilot: Some(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA),
+            params: params.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn partial_servo_functions_are_warned_about() {
+        // A plane whose rudder is on output 2 (SERVO2_FUNCTION 21) while the elevator's
+        // parameter has not arrived: the elevator keeps its default output 2.
+        let d = detect(&info(
+            MavType::MAV_TYPE_FIXED_WING,
+            &[("SERVO1_FUNCTION", 4.0), ("SERVO2_FUNCTION", 21.0)],
+        ))
+        .unwrap();
+        let all = d.warnings.join(" | ");
+        assert!(all.contains("2 of 3 actuators"), "{all}");
+        assert!(all.contains("both on output 2"), "{all}");
+        // All four motors of a quad given: no warning about the mapping.
+        let d = detect(&info(
+            MavType::MAV_TYPE_QUADROTOR,
+            &[
+                ("FRAME_TYPE", 1.0),
+                ("SERVO1_FUNCTION", 33.0),
+                ("SERVO2_FUNCTION", 34.0),
+                ("SERVO3_FUNCTION", 35.0),
+                ("SERVO4_FUNCTION", 36.0),
+            ],
+        ))
+        .unwrap();
+        assert!(d.warnings.is_empty(), "{:?}", d.warnings);
+        // A motor past output 16 is mapped there (and then counted as missing its output).
+        let d = detect(&info(
+            MavType::MAV_TYPE_QUADROTOR,
+            &[
+                ("FRAME_TYPE", 1.0),
+                ("SERVO1_FUNCTION", 33.0),
+                ("SERVO2_FUNCTION", 34.0),
+                ("SERVO3_FUNCTION", 35.0),
+                ("SERVO17_FUNCTION", 36.0),
+            ],
+        ))
+        .unwrap();
+        assert_eq!(d.profile.actuators[3].channel, 17);
+    }
 }
