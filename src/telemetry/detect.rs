@@ -237,31 +237,22 @@ mod tests {
         let all = d.warnings.join(" | ");
         assert!(all.contains("2 of 3 actuators"), "{all}");
         assert!(all.contains("both on output 2"), "{all}");
-        // All four motors of a quad given: no warning about the mapping.
-        let d = detect(&info(
-            MavType::MAV_TYPE_QUADROTOR,
-            &[
+        // All four motors of a quad given: no warning about the mapping. A motor past output
+        // 16 is mapped there (and then counted as missing its output).
+        let quad = |motor4_output: u8| {
+            let motor4 = format!("SERVO{motor4_output}_FUNCTION");
+            let params = [
                 ("FRAME_TYPE", 1.0),
                 ("SERVO1_FUNCTION", 33.0),
                 ("SERVO2_FUNCTION", 34.0),
                 ("SERVO3_FUNCTION", 35.0),
-                ("SERVO4_FUNCTION", 36.0),
-            ],
-        ))
-        .unwrap();
+                (motor4.as_str(), 36.0),
+            ];
+            detect(&info(MavType::MAV_TYPE_QUADROTOR, &params)).unwrap()
+        };
+        let d = quad(4);
         assert!(d.warnings.is_empty(), "{:?}", d.warnings);
-        // A motor past output 16 is mapped there (and then counted as missing its output).
-        let d = detect(&info(
-            MavType::MAV_TYPE_QUADROTOR,
-            &[
-                ("FRAME_TYPE", 1.0),
-                ("SERVO1_FUNCTION", 33.0),
-                ("SERVO2_FUNCTION", 34.0),
-                ("SERVO3_FUNCTION", 35.0),
-                ("SERVO17_FUNCTION", 36.0),
-            ],
-        ))
-        .unwrap();
+        let d = quad(17);
         assert_eq!(d.profile.actuators[3].channel, 17);
     }
 }
