@@ -490,6 +490,10 @@ fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> anyhow::Result<f64> {
     }
 }
 
+/// Longest a paced replay waits for the next record; a longer wait is a hole in the log (or
+/// a timestamp off by hours), skipped.
+const MAX_PACE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Bounds of `--speed` (multiple of real time) and of the monitor's timeouts (s).
 const SPEED_RANGE: (f64, f64) = (1e-3, 1e6);
 const TIMEOUT_RANGE_S: (f64, f64) = (1e-3, 1e6);
@@ -887,7 +891,8 @@ fn replay(
     };
     let progress = ui.is_none() && std::io::stderr().is_terminal();
     let started = std::time::Instant::now();
-    let mut first_ts = None;
+    // Pacing for --speed: a log timestamp and the moment it was replayed.
+    let mut pace: Option<(u64, std::time::Instant)> = None;
     let mut shown = 0;
     let mut last_draw = std::time::Instant::now();
     let mut quit = false;
@@ -903,13 +908,17 @@ fn replay(
             let _ = ui.draw(&monitor, &files.seen, reader.counters, Some(0.0), false);
         }
         if let Some(x) = speed {
-            let t0 = *first_ts.get_or_insert(ts);
-            // A garbage timestamp far ahead must not stop the replay: no wait for it.
+            let (t0, at) = *pace.get_or_insert((ts, std::time::Instant::now()));
             let due =
                 std::time::Duration::try_from_secs_f64(ts.saturating_sub(t0) as f64 * 1e-6 / x)
-                    .unwrap_or_default();
-            if let Some(wait) = due.checked_sub(started.elapsed()) {
-                std::thread::sleep(wait);
+                    .unwrap_or(std::time::Duration::MAX);
+            match due.checked_sub(at.elapsed()) {
+                // A hole in the log, or a clock that jumps: go on from here, not sleep through.
+                Some(wait) if wait > MAX_PACE_WAIT => {
+                    pace = Some((ts, std::time::Instant::now()));
+                }
+                Some(wait) => std::thread::sleep(wait),
+                None => {}
             }
         }
         monitor.on_frame(&frame, &mut files);

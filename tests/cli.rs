@@ -186,3 +186,40 @@ fn a_full_disk_is_reported_and_the_summary_still_printed() {
     assert!(err.contains("No space left on device"), "{err}");
     assert!(out.contains("replayed "), "no summary: {out}");
 }
+
+/// `--speed` on a log whose first timestamp is garbage (zero): the replay skips the
+/// impossible wait instead of sleeping for decades.
+#[test]
+fn paced_replay_does_not_sleep_through_a_garbage_timestamp() {
+    let dir = common::temp_dir("cli_paced_garbage");
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("replay/tlogs/sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let mut bytes = std::fs::read(src).unwrap();
+    bytes[..8].copy_from_slice(&0u64.to_be_bytes());
+    let tlog = dir.join("garbage-first.tlog");
+    std::fs::write(&tlog, &bytes).unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .args([
+            "replay",
+            tlog.to_str().unwrap(),
+            "--speed",
+            "1000",
+            "--headless",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert!(status.success());
+            break;
+        }
+        if std::time::Instant::now() > deadline {
+            child.kill().ok();
+            panic!("the paced replay did not end within 60 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}

@@ -17,6 +17,8 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 /// How long a sender waits for an outgoing TCP connection before dropping the frame (it tries
 /// again a second later).
 const SEND_CONNECT_TIMEOUT: Duration = Duration::from_millis(100);
+/// How long a send may wait for room in a TCP peer's buffer.
+const SEND_WRITE_TIMEOUT: Duration = Duration::from_millis(100);
 
 #[derive(Debug, Error)]
 pub enum ConnError {
@@ -114,11 +116,15 @@ async fn write_or_drop(stream: &mut Option<TcpStream>, frame: &[u8]) -> bool {
     let Some(s) = stream.as_mut() else {
         return false;
     };
-    if s.write_all(frame).await.is_ok() {
-        true
-    } else {
-        *stream = None;
-        false
+    // A peer that stops reading fills the socket's buffer; waiting on it would stall the
+    // monitor, so a write that does not finish soon drops the connection (a partial frame
+    // has spoilt the stream anyway).
+    match tokio::time::timeout(SEND_WRITE_TIMEOUT, s.write_all(frame)).await {
+        Ok(Ok(())) => true,
+        _ => {
+            *stream = None;
+            false
+        }
     }
 }
 
@@ -324,10 +330,14 @@ impl Link {
             // ctrl-c) must go on while no planner is there. Frames until then are not sent.
             Transport::TcpIn { listener, stream } => {
                 if stream.is_none() {
-                    match tokio::time::timeout(Duration::ZERO, listener.accept()).await {
-                        Ok(Ok((s, _))) => *stream = Some(s),
-                        Ok(Err(e)) => return Err(io(e)),
-                        Err(_) => return Ok(false),
+                    // One look at the backlog, no waiting (not even a timer tick).
+                    let polled =
+                        std::future::poll_fn(|cx| std::task::Poll::Ready(listener.poll_accept(cx)))
+                            .await;
+                    match polled {
+                        std::task::Poll::Ready(Ok((s, _))) => *stream = Some(s),
+                        std::task::Poll::Ready(Err(e)) => return Err(io(e)),
+                        std::task::Poll::Pending => return Ok(false),
                     }
                 }
                 Ok(write_or_drop(stream, frame).await)
@@ -413,6 +423,23 @@ mod tests {
             let mut got = [0u8; 5];
             client.read_exact(&mut got).await.expect("read");
             assert_eq!(&got, b"hello");
+            // A planner that stops reading: once its buffers are full the connection is
+            // dropped, and no send waits long.
+            let big = vec![0u8; 65536];
+            let mut dropped = false;
+            for _ in 0..400 {
+                let sent = tokio::time::timeout(limit, server.send(&big)).await;
+                match sent {
+                    Ok(Ok(true)) => {}
+                    Ok(Ok(false)) => {
+                        dropped = true;
+                        break;
+                    }
+                    other => panic!("a send waited or failed: {other:?}"),
+                }
+            }
+            assert!(dropped, "26 MB went into a peer that reads nothing");
+            drop(client);
             // tcpout to nobody: not sent, and not retried within the second.
             let closed = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
             let port = closed.local_addr().expect("addr").port();

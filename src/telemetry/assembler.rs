@@ -12,9 +12,12 @@ use std::collections::BTreeMap;
 
 /// Standard gravity (ArduPilot's GRAVITY_MSS): RAW_IMU / SCALED_IMU accelerations are in mG.
 const G0: f64 = 9.80665;
-/// Largest backwards step of the vehicle clock treated as reordering; more is a reboot when a
-/// second message confirms the new clock (within this window of the first).
+/// Largest backwards step of the vehicle clock treated as reordering; more is a reboot once
+/// messages on the new clock have covered `REBOOT_HOLD_S` of it with no message on the old
+/// clock in between (a lagging second link sends bursts of old instants, not a clock that
+/// runs on), all within `REBOOT_CONFIRM_S` of the first.
 const REBOOT_BACKSTEP_S: f64 = 1.0;
+const REBOOT_HOLD_S: f64 = 0.5;
 const REBOOT_CONFIRM_S: f64 = 5.0;
 
 /// One instant of one vehicle: what an estimator step needs, before normalisation.
@@ -109,8 +112,8 @@ pub struct VehicleAssembler {
     clock: Option<f64>,
     /// Set when a reboot was seen; the caller resets its filters.
     pub rebooted: bool,
-    /// A message more than a second behind the clock, held until a second one confirms a
-    /// reboot (a single stale message, e.g. from a second link, is only out of order).
+    /// The first of the messages more than a second behind the clock since the last one on
+    /// it: a reboot once they cover `REBOOT_HOLD_S` (stale copies from a second link do not).
     reboot_candidate: Option<f64>,
     /// The vehicle sends IMU accelerations: a complete instant waits for its a_z.
     has_imu: bool,
@@ -121,14 +124,16 @@ pub struct VehicleAssembler {
     pending: Option<TelemetrySample>,
 }
 
-/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time.
+/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
+/// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
+/// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
 fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
     let raw = f64::from(stamp) * 1e-6;
     match reference_s {
         None => raw,
         Some(r) => {
             let span = 4_294_967_296e-6;
-            raw + ((r - raw) / span).round() * span
+            raw + ((r + REBOOT_BACKSTEP_S - raw) / span).floor().max(0.0) * span
         }
     }
 }
@@ -182,11 +187,13 @@ impl VehicleAssembler {
             self.clock = Some(c.max(t));
             return true;
         }
-        let confirmed = self.reboot_candidate.is_some_and(|first| {
-            (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t)
-        });
-        if !confirmed {
-            self.reboot_candidate = Some(t);
+        // The first message on the new clock, if this one is on it too.
+        let first = self
+            .reboot_candidate
+            .filter(|&first| (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t));
+        if !first.is_some_and(|first| t - first >= REBOOT_HOLD_S) {
+            // Not (yet) enough of the new clock: dropped and counted.
+            self.reboot_candidate = Some(first.unwrap_or(t));
             self.counters.out_of_order += 1;
             return false;
         }
@@ -604,24 +611,43 @@ mod tests {
 
     #[test]
     fn a_reboot_drops_the_sample_waiting_for_its_az_and_starts_the_new_clock() {
+        // Late in a u32-µs wrap period of SERVO_OUTPUT_RAW (3000 s of uptime), so that the
+        // outputs' stamps after the reboot must unwrap behind the clock too.
+        let up = 3_000_000;
         let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
-        let got = feed(
-            &mut a,
-            &[attitude(600_000), outputs(600_000, 1500), imu(600_000)],
-        );
+        let got = feed(&mut a, &[attitude(up), outputs(up, 1500), imu(up)]);
         assert_eq!(got.len(), 1);
         // The next instant's IMU message is lost; then the vehicle reboots.
-        let got = feed(&mut a, &[attitude(600_020), outputs(600_020, 1500)]);
+        let got = feed(&mut a, &[attitude(up + 20), outputs(up + 20, 1500)]);
         assert!(got.is_empty(), "waits for its a_z");
-        let got = feed(&mut a, &[attitude(2_000), outputs(2_000, 1500), imu(2_000)]);
+        let mut after = vec![];
+        for k in 0..60 {
+            let ms = 2_000 + 20 * k;
+            after.extend(feed(&mut a, &[attitude(ms), outputs(ms, 1500), imu(ms)]));
+        }
         assert!(a.rebooted);
         assert_eq!(a.counters.reboots, 1);
         assert_eq!(a.counters.dropped_at_reboot, 1);
-        // Nothing of the old boot comes out after it; the new clock goes on from the next
-        // instant (the first message of the new boot only proposed the reboot).
-        assert!(got.iter().all(|s| s.t < 10.0), "{got:?}");
-        let got = feed(&mut a, &[attitude(2_020), outputs(2_020, 1500), imu(2_020)]);
-        assert_eq!(got.len(), 1);
-        assert_eq!(got[0].t, 2.02);
+        // Nothing of the old boot comes out after it; the new clock's instants do, once half a
+        // second of it has confirmed the reboot.
+        assert!(after.iter().all(|s| s.t < 10.0), "{after:?}");
+        assert!(after.len() >= 30, "{}", after.len());
+    }
+
+    #[test]
+    fn a_lagging_links_bursts_of_old_instants_are_no_reboot() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        for k in 0..100 {
+            let ms = 600_000 + 20 * k;
+            feed(&mut a, &[attitude(ms), outputs(ms, 1500)]);
+            // The same flight through a second link, 3 s late, in bursts between live ones.
+            if k % 10 == 0 {
+                feed(&mut a, &[attitude(ms - 3000), outputs(ms - 3000, 1500)]);
+            }
+        }
+        assert!(!a.rebooted);
+        assert_eq!(a.counters.reboots, 0);
+        assert_eq!(a.counters.samples, 100);
+        assert_eq!(a.counters.out_of_order, 20);
     }
 }
