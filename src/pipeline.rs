@@ -420,8 +420,10 @@ impl VehiclePipeline {
                     }
                 }
                 // The same limit as the calibration's: a lost sample is a gap.
-                if s.t - r.last_t > 1.5 * r.dt {
+                let gap = s.t - r.last_t > 1.5 * r.dt;
+                if gap {
                     self.counters.gaps += 1;
+                    r.diag.residual_gap();
                     // What came before the gap is no longer the previous step: no delayed
                     // commands from it (the oldest known stands in) and no increment across it.
                     r.u_pushed = 0;
@@ -444,9 +446,16 @@ impl VehiclePipeline {
                 } else {
                     r.l
                 };
+                let rates_before = r.rates_prev[1];
                 r.rates_prev = [r.rates_prev[1], s.rates];
                 let prev_u = acting;
                 let res = r.filters.step(&input[..n_in], &y[..r.m]);
+                if !gap {
+                    let residual =
+                        r.filters
+                            .healthy_residual(&rates_before, &input[..n_in], &y[..r.m]);
+                    r.diag.observe(s.t, &residual, &prev_u[..r.l]);
+                }
                 self.counters.steps += 1;
                 for (f, out) in res.iter().enumerate() {
                     if out.is_err() {

@@ -4,6 +4,7 @@
 //! hold-off time (hysteresis). A set filter adds its explicit indication (the paper's
 //! conclusion): a step whose data no state in its set can explain is a fault at once.
 
+pub mod change;
 pub mod vehicle;
 
 /// A decision event of the bounds rule.

@@ -30,6 +30,7 @@
 //! mismatch (`ahcmon thresholds`), never on the fault scenarios; a profile without a
 //! `gain_threshold` has no gain term.
 
+use super::change::{ChangeKind, ChangeTest, Reading};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::telemetry::{Profile, Role};
 use serde::Serialize;
@@ -303,7 +304,27 @@ pub struct Diagnoser {
     /// Per filter, the last update's `(j, m)` from `explain` (motor `j`'s loss chosen, motor
     /// `m`'s excess nearly as good), for the decision's detail.
     prior_decided: [Option<(usize, usize)>; 2],
+    /// The healthy model's recent residuals and what they say changed (see `change`), read
+    /// while something is under way (a CUSUM above zero, an alarm, a fault in force).
+    change: ChangeTest,
+    reading: Option<Reading>,
 }
+
+/// Residuals kept for the change test (s), and the shortest changed stretch it fits (s).
+const CHANGE_HORIZON_S: f64 = 6.0;
+const CHANGE_MIN_S: f64 = 0.2;
+/// At most this many residuals are kept, whatever the rate (the test's cost is linear in it).
+const CHANGE_MAX_SAMPLES: usize = 600;
+
+/// The change test's answer counts when the best change beats the alternative by this many
+/// times the residual variance it leaves (a likelihood ratio of e^10 were the noise white):
+/// any change of another actuator for the isolation (the attribution then starts from its
+/// actuator), another kind of change of the same actuator for the class.
+const DATA_MARGIN: f64 = 20.0;
+
+/// The class also waits for this much of the changed stretch (s): gusts make the residual
+/// coloured, so a short stretch holds fewer independent samples than it counts.
+const CLASS_MIN_S: f64 = 1.0;
 
 /// Seconds of `u_quiet` std snapshots kept (see `ActuatorState::quiet_sd`).
 const QUIET_SNAPSHOTS: usize = 4;
@@ -345,6 +366,14 @@ impl Diagnoser {
         if motors.len() < 3 {
             motors.clear();
         }
+        let capacity = ((CHANGE_HORIZON_S / dt).round() as usize).clamp(16, CHANGE_MAX_SAMPLES);
+        let change = ChangeTest::new(
+            effects.clone(),
+            crate::estimate::vehicle::residual_weights(profile, dt),
+            profile.measurements(),
+            capacity,
+            ((CHANGE_MIN_S / dt).round() as usize).max(5),
+        );
         let params = DiagnosisParams {
             threshold: profile.diagnosis.threshold,
             gain_threshold: profile.diagnosis.gain_threshold.unwrap_or(f64::INFINITY),
@@ -363,7 +392,65 @@ impl Diagnoser {
             is_motor,
             is_angle,
             prior_decided: [None; 2],
+            change,
+            reading: None,
         }
+    }
+
+    /// Feed the healthy model's residual of this step (`VehicleFilters::healthy_residual`) and
+    /// the commands that acted, before `update`.
+    pub fn observe(&mut self, t: f64, residual: &[f64; 4], u: &[f64]) {
+        self.change.push(t, residual, u);
+    }
+
+    /// The telemetry has a hole (or the vehicle restarted): residuals across it mean nothing.
+    pub fn residual_gap(&mut self) {
+        self.change.clear();
+    }
+
+    /// The change test's last reading (`None` while nothing is under way).
+    pub fn reading(&self) -> Option<Reading> {
+        self.reading
+    }
+
+    /// The class the change test gives actuator `j`, when it is the one the test names and the
+    /// stretch is long enough and one kind fits clearly best.
+    fn data_class(&self, j: usize) -> Option<FaultClass> {
+        let r = self.reading.filter(|r| r.actuator == j)?;
+        let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
+        if !long || r.drop - r.next_kind_drop < DATA_MARGIN * r.noise_var {
+            return None;
+        }
+        let p = &self.params;
+        match r.kind {
+            ChangeKind::Gain if r.value < 1.0 - p.loe_tau => Some(FaultClass::LossOfEffectiveness),
+            ChangeKind::Offset if r.value.abs() > p.bias_tau => Some(FaultClass::Bias),
+            ChangeKind::Stuck => Some(FaultClass::Stuck),
+            _ => None,
+        }
+    }
+
+    /// The change test names, with its isolation margin, a motor other than `j` with a fault
+    /// in force that is an offset or a stuck output.
+    fn data_names_motor_offset(&self, j: usize) -> bool {
+        self.reading.is_some_and(|r| {
+            r.actuator != j
+                && self.is_motor[r.actuator]
+                && matches!(r.kind, ChangeKind::Offset | ChangeKind::Stuck)
+                && self.actuators[r.actuator].active.is_some()
+                && r.drop - r.next_actuator_drop >= DATA_MARGIN * r.noise_var
+        })
+    }
+
+    /// What the change test reads for actuator `j`, for a decision's detail.
+    fn data_note(&self, j: usize) -> Option<String> {
+        let r = self.reading.filter(|r| r.actuator == j)?;
+        let what = match r.kind {
+            ChangeKind::Gain => format!("a gain of {:.2}", r.value),
+            ChangeKind::Offset => format!("an offset of {:+.3}", r.value),
+            ChangeKind::Stuck => format!("an output stuck at {:.3}", r.value),
+        };
+        Some(format!("since t={:.2} s the data fit {what} best", r.since))
     }
 
     /// Three or more motors moving together is thrust mismatch (a payload, a sagging battery,
@@ -404,7 +491,12 @@ impl Diagnoser {
     /// Returns `(j, m)` when the first actuator joined is motor `j` giving less than commanded
     /// and motor `m` giving more explains nearly as much (`ALTERNATIVE_SHARE`): the
     /// measurements hardly tell the two apart (opposite motors differ only in a_z).
-    fn explain(&self, e: &[f64], out: &mut [f64]) -> Option<(usize, usize)> {
+    fn explain(
+        &self,
+        e: &[f64],
+        out: &mut [f64],
+        preferred: Option<usize>,
+    ) -> Option<(usize, usize)> {
         const MAX_JOINED: usize = 4;
         let l = e.len();
         let b = &self.effects;
@@ -444,16 +536,21 @@ impl Diagnoser {
                     e
                 }
             };
-            let cand = (0..l)
-                .filter(|j| !joined[..k].contains(j))
-                .map(|j| (j, share(&b[j], &rest)))
-                .max_by(|p, q| energy(p.0, p.1).total_cmp(&energy(q.0, q.1)));
+            // The actuator the change test names comes first: the data settled what the prior
+            // would have guessed.
+            let cand = match preferred.filter(|&p| k == 0 && p < l) {
+                Some(p) => Some((p, share(&b[p], &rest))),
+                None => (0..l)
+                    .filter(|j| !joined[..k].contains(j))
+                    .map(|j| (j, share(&b[j], &rest)))
+                    .max_by(|p, q| energy(p.0, p.1).total_cmp(&energy(q.0, q.1))),
+            };
             let Some((j, sj)) = cand else { break };
             // Also the first: what no single actuator explains enough of is model error.
             if sj.abs() < self.params.explain_min {
                 break;
             }
-            if k == 0 && sj < 0.0 && self.is_motor[j] {
+            if k == 0 && sj < 0.0 && self.is_motor[j] && preferred.is_none() {
                 let unweighted = |m: usize| {
                     let s = share(&b[m], &rest);
                     (s > 0.0 && self.is_motor[m]).then(|| s * s * dot(&b[m], &b[m]))
@@ -618,6 +715,21 @@ impl Diagnoser {
                 };
             }
         }
+        // The change test, only while something is under way (its cost is the horizon's length
+        // times the actuators), names the actuator the attribution starts from.
+        let under_way = self
+            .actuators
+            .iter()
+            .any(|st| st.active.is_some() || st.channels.iter().any(|c| c.cusum > 0.0 || c.alarm));
+        self.reading = if warm && under_way {
+            self.change.evaluate()
+        } else {
+            None
+        };
+        let preferred = self
+            .reading
+            .filter(|r| r.drop - r.next_actuator_drop >= DATA_MARGIN * r.noise_var)
+            .map(|r| r.actuator);
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
         let mut prior_decided = [None; 2];
         for (k, (xs, rs)) in explained.iter_mut().zip(&raw).enumerate() {
@@ -628,7 +740,7 @@ impl Diagnoser {
                 } else {
                     *r
                 };
-                let decided = self.explain(&e[..l], &mut x[..l]);
+                let decided = self.explain(&e[..l], &mut x[..l], preferred);
                 if k == 0 {
                     prior_decided[f] = decided;
                 }
@@ -732,12 +844,18 @@ impl Diagnoser {
             }
             // Classification needs the command to have moved enough to separate gamma and delta.
             let excited = !low;
-            let class = if excited {
+            let class = if excited || self.data_class(j).is_some() {
                 self.classify(j)
             } else {
                 FaultClass::Unclassified
             };
             let st = &self.actuators[j];
+            // A motor's offset or stuck output, which the filters hold near zero by design
+            // (motors fail low), spreads over the other motors' estimates: while the data pin
+            // it on its motor, their alarms are listed with it (`also`), not decided apart.
+            if st.active.is_none() && self.is_motor[j] && self.data_names_motor_offset(j) {
+                continue;
+            }
             match (st.active, class) {
                 (None, c) => {
                     let mut d = self.decision(t, j, Event::Fault, Some(c), filters);
@@ -749,9 +867,13 @@ impl Diagnoser {
                             self.actuators[j].u.var.sqrt()
                         ));
                     }
-                    for note in [self.alternative(j), self.read_by_prior(j, c, t)]
-                        .into_iter()
-                        .flatten()
+                    for note in [
+                        self.alternative(j),
+                        self.read_by_prior(j, c, t),
+                        self.data_note(j),
+                    ]
+                    .into_iter()
+                    .flatten()
                     {
                         append_detail(&mut d, note);
                     }
@@ -791,7 +913,10 @@ impl Diagnoser {
                     if c != prev || union != st.active_filters {
                         let mut d = self.decision(t, j, Event::Changed, Some(c), union);
                         d.also = self.also(j);
-                        if let Some(note) = self.read_by_prior(j, c, t) {
+                        for note in [self.read_by_prior(j, c, t), self.data_note(j)]
+                            .into_iter()
+                            .flatten()
+                        {
                             append_detail(&mut d, note);
                         }
                         out.push(d);
@@ -823,6 +948,9 @@ impl Diagnoser {
     /// offset changes look alike there, so the class came from the filters' prior (motors
     /// lose gain), not from the data. Says so, with the reading the data could not rule out.
     fn read_by_prior(&self, j: usize, class: FaultClass, t: f64) -> Option<String> {
+        if self.data_class(j) == Some(class) {
+            return None;
+        }
         let st = &self.actuators[j];
         let mean = st.u.mean;
         // The variation before the alarm: the controller's step that hides the fault is no
@@ -867,35 +995,50 @@ impl Diagnoser {
             .collect()
     }
 
+    /// Whether the MIT-UKF's delta has moved steadily over the last 3 s (t-test on the slope
+    /// of its regression on time, and a span over the bias tolerance).
+    fn drifting(&self, j: usize) -> bool {
+        let st = &self.actuators[j];
+        if st.delta_hist.len() <= 20 {
+            return false;
+        }
+        let n = st.delta_hist.len() as f64;
+        let (mt, md) = st
+            .delta_hist
+            .iter()
+            .fold((0.0, 0.0), |a, (t, d)| (a.0 + t / n, a.1 + d / n));
+        let (mut stt, mut std_, mut sdd) = (0.0, 0.0, 0.0);
+        for (t, d) in &st.delta_hist {
+            stt += (t - mt) * (t - mt);
+            std_ += (t - mt) * (d - md);
+            sdd += (d - md) * (d - md);
+        }
+        let slope = std_ / stt;
+        let resid = (sdd - slope * std_).max(0.0) / (n - 2.0);
+        let se = (resid / stt).sqrt();
+        let span = slope.abs() * (st.delta_hist.back().map_or(0.0, |b| b.0) - st.delta_hist[0].0);
+        se > 0.0 && slope.abs() / se > 30.0 && span > self.params.bias_tau
+    }
+
     fn classify(&self, j: usize) -> FaultClass {
         let p = &self.params;
         let st = &self.actuators[j];
         let e = st.channels[0].last;
+        let drifting = self.drifting(j);
+        // The data's reading first (a steadily moving offset is a drift).
+        if let Some(c) = self.data_class(j) {
+            return if c == FaultClass::Bias && drifting {
+                FaultClass::Drift
+            } else {
+                c
+            };
+        }
         let gamma_contains_one = e.gamma_lo <= 1.0 && 1.0 <= e.gamma_hi;
         if e.gamma.abs() < p.stuck_gamma && !gamma_contains_one {
             return FaultClass::Stuck;
         }
-        // Drift: delta moving steadily over the last 3 s (t-test on the regression slope).
-        if st.delta_hist.len() > 20 {
-            let n = st.delta_hist.len() as f64;
-            let (mt, md) = st
-                .delta_hist
-                .iter()
-                .fold((0.0, 0.0), |a, (t, d)| (a.0 + t / n, a.1 + d / n));
-            let (mut stt, mut std_, mut sdd) = (0.0, 0.0, 0.0);
-            for (t, d) in &st.delta_hist {
-                stt += (t - mt) * (t - mt);
-                std_ += (t - mt) * (d - md);
-                sdd += (d - md) * (d - md);
-            }
-            let slope = std_ / stt;
-            let resid = (sdd - slope * std_).max(0.0) / (n - 2.0);
-            let se = (resid / stt).sqrt();
-            let span =
-                slope.abs() * (st.delta_hist.back().map_or(0.0, |b| b.0) - st.delta_hist[0].0);
-            if se > 0.0 && slope.abs() / se > 30.0 && span > p.bias_tau {
-                return FaultClass::Drift;
-            }
+        if drifting {
+            return FaultClass::Drift;
         }
         if e.gamma < 1.0 - p.loe_tau
             && e.delta.abs() < p.bias_tau.max(0.5 * (1.0 - e.gamma) * st.u.mean.abs())
@@ -997,7 +1140,7 @@ mod tests {
     fn a_lone_deviation_is_attributed_whole_to_its_actuator() {
         let d = diagnoser("quad-x");
         let mut out = [0.0; 4];
-        d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out);
+        d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out, None);
         assert!((out[1] + 0.2).abs() < 1e-9, "{out:?}");
         for (j, x) in out.iter().enumerate().filter(|(j, _)| *j != 1) {
             assert!(x.abs() < 1e-9, "actuator {j}: {x}");
@@ -1009,7 +1152,7 @@ mod tests {
         // Helicopter: swash servo 2 and the tail (independent effects).
         let d = diagnoser("heli-h3-120");
         let mut out = [0.0; 4];
-        d.explain(&[0.0, -0.15, 0.0, 0.12], &mut out);
+        d.explain(&[0.0, -0.15, 0.0, 0.12], &mut out, None);
         assert!(
             (out[1] + 0.15).abs() < 1e-6 && (out[3] - 0.12).abs() < 1e-6,
             "{out:?}"
@@ -1024,7 +1167,7 @@ mod tests {
         // fitted at the full -0.6 each; with it, one motor gets only its single share.
         let d = diagnoser("hexa-x");
         let mut out = [0.0; 6];
-        d.explain(&[0.0, 0.0, 0.0, 0.0, -0.6, -0.6], &mut out);
+        d.explain(&[0.0, 0.0, 0.0, 0.0, -0.6, -0.6], &mut out, None);
         assert!(out.iter().all(|x| x.abs() < 0.15), "{out:?}");
     }
 
@@ -1035,19 +1178,96 @@ mod tests {
         let d = diagnoser("hexa-x");
         let mut out = [0.0; 6];
         assert_eq!(
-            d.explain(&[0.0, 0.0, 0.0, 0.0, 0.2, 0.0], &mut out),
+            d.explain(&[0.0, 0.0, 0.0, 0.0, 0.2, 0.0], &mut out, None),
             Some((5, 4))
         );
         // And a lone loss of motor 6 names motor 5 too: on a hexacopter they are that close.
         assert_eq!(
-            d.explain(&[0.0, 0.0, 0.0, 0.0, 0.0, -0.2], &mut out),
+            d.explain(&[0.0, 0.0, 0.0, 0.0, 0.0, -0.2], &mut out, None),
             Some((5, 4))
         );
         // A quad X motor's loss: the opposite motor's excess also differs in yaw, clearly
         // worse; no alternative.
         let d = diagnoser("quad-x");
         let mut out = [0.0; 4];
-        assert_eq!(d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out), None);
+        assert_eq!(d.explain(&[0.0, -0.2, 0.0, 0.0], &mut out, None), None);
+    }
+
+    #[test]
+    fn the_actuator_the_data_name_is_attributed_first() {
+        // Hexa X: motor 5 giving more than commanded looks like motor 6 giving less; the prior
+        // picks motor 6 (above), the change test's motor 5 wins.
+        let d = diagnoser("hexa-x");
+        let mut out = [0.0; 6];
+        assert_eq!(
+            d.explain(&[0.0, 0.0, 0.0, 0.0, 0.0, -0.2], &mut out, Some(4)),
+            None
+        );
+        assert!(out[4] > 0.15 && out[5].abs() < 0.05, "{out:?}");
+    }
+
+    #[test]
+    fn a_stuck_motor_the_filters_blame_on_its_opposite_is_named_and_classed_by_the_data() {
+        // Hexa X, motor 5 stuck at 0.62 from t = 8 s while its command moves about 0.5. The
+        // filters, which hold a motor's offset near zero, put it on opposite motor 6 as a
+        // loss (what they did on hexa-x-motor5-stuck); the healthy model's residuals carry
+        // motor 5's real effect. The decision names motor 5, stuck, and none names motor 6.
+        let p = Profile::resolve("hexa-x").unwrap();
+        let dt = 0.02;
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, dt);
+        let effects = crate::estimate::vehicle::weighted_effects(&p, dt);
+        let weights = crate::estimate::vehicle::residual_weights(&p, dt);
+        let mut rng = crate::sim::rng::Rng::new(3);
+        let healthy = healthy_estimate(0.02);
+        let mut decisions = vec![];
+        let mut out = vec![];
+        for k in 0..600 {
+            let t = k as f64 * dt;
+            let mut u = [0.0; 6];
+            for (i, x) in u.iter_mut().enumerate() {
+                *x = 0.5 + 0.04 * (t * (2.0 + i as f64)).sin();
+            }
+            let stuck = t >= 8.0;
+            let change = if stuck { 0.62 - u[4] } else { 0.0 };
+            let mut residual = [0.0; 4];
+            for (i, r) in residual.iter_mut().enumerate() {
+                if weights[i] > 0.0 {
+                    *r = (effects[4][i] * change + 0.3 * rng.normal()) / weights[i];
+                }
+            }
+            d.observe(t, &residual, &u);
+            let mut est = [healthy; 6];
+            if stuck {
+                est[5].gamma = 0.75;
+                est[5].gamma_lo = 0.7;
+                est[5].gamma_hi = 0.8;
+            }
+            d.update(t, &u, &[&est, &est], &mut out);
+            decisions.append(&mut out);
+        }
+        let faults: Vec<_> = decisions
+            .iter()
+            .filter(|x| matches!(x.event, Event::Fault | Event::Changed))
+            .collect();
+        assert!(!faults.is_empty(), "{decisions:?}");
+        assert!(
+            faults
+                .iter()
+                .all(|x| x.actuator.as_deref() == Some("motor5")),
+            "{faults:?}"
+        );
+        let last = faults.last().unwrap();
+        assert_eq!(last.class, Some(FaultClass::Stuck), "{faults:?}");
+        assert!(
+            last.detail
+                .as_deref()
+                .unwrap_or("")
+                .contains("stuck at 0.6"),
+            "{last:?}"
+        );
+        let r = d.reading().expect("a reading while the fault is in force");
+        assert_eq!((r.actuator, r.kind), (4, ChangeKind::Stuck));
+        assert!((r.since - 8.0).abs() < 0.1, "{r:?}");
     }
 
     #[test]

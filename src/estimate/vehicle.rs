@@ -77,6 +77,9 @@ pub trait VehicleFilters: Send {
     /// an identified model the previous measured rate increment), `y` = [p, q, r(, a_z)].
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2];
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate;
+    /// What the healthy model (gamma = 1, delta = 0) fails to predict of `y` from the previous
+    /// measured rates and this step's inputs (same `u` as `step`): `[p, q, r(, a_z)]`, unweighted.
+    fn healthy_residual(&self, rates_prev: &[f64; 3], u: &[f64], y: &[f64]) -> [f64; 4];
     /// The normalised innovation square (UKF) or `M (1 - consistency)` (ESMF) of the last step.
     fn nis(&self, filter: usize) -> f64;
     /// Re-initialise one filter (after repeated numerical failure).
@@ -184,6 +187,25 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
     }
 }
 
+/// The noise the filters assume on a rate row per step at `dt`, and on a_z: what
+/// [`weighted_effects`] and [`residual_weights`] divide by.
+fn noise_sd(profile: &Profile, dt: f64) -> (f64, f64) {
+    let rate_sd = (profile.noise.rate_process * (dt * profile.rate_hz).sqrt()).max(1e-9);
+    (rate_sd, profile.noise.az.max(1e-9))
+}
+
+/// Inverse noise std of each measurement row, `[roll, pitch, yaw, a_z]` (a_z 0 when not
+/// measured): the metric of [`weighted_effects`], for the healthy model's residuals.
+pub fn residual_weights(profile: &Profile, dt: f64) -> [f64; 4] {
+    let (rate_sd, az_sd) = noise_sd(profile, dt);
+    let az = if profile.model.measure_az {
+        1.0 / az_sd
+    } else {
+        0.0
+    };
+    [1.0 / rate_sd, 1.0 / rate_sd, 1.0 / rate_sd, az]
+}
+
 /// What one unit of each actuator's effective output does to the measurements over one step,
 /// `[roll, pitch, yaw, a_z]` (a_z zero when not measured), each row divided by the noise the
 /// filters assume on it: the metric in which the diagnosis asks which single actuator explains
@@ -191,8 +213,7 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
 #[allow(clippy::needless_range_loop)] // rows i of the effect, as in the model
 pub fn weighted_effects(profile: &Profile, dt: f64) -> Vec<[f64; 4]> {
     let l = profile.actuators.len();
-    let rate_sd = (profile.noise.rate_process * (dt * profile.rate_hz).sqrt()).max(1e-9);
-    let az_sd = profile.noise.az.max(1e-9);
+    let (rate_sd, az_sd) = noise_sd(profile, dt);
     let az = profile.model.measure_az;
     let mut out = vec![[0.0; 4]; l];
     match &profile.model.arx {
@@ -348,6 +369,26 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         } else {
             [ukf.try_step(u, &y), esmf.try_step(u, &y).map(|_| ())]
         }
+    }
+    fn healthy_residual(&self, rates_prev: &[f64; 3], u: &[f64], y: &[f64]) -> [f64; 4] {
+        use crate::model::Model;
+        let model = &self.setup.model;
+        let mut out = [f64::NAN; 4];
+        if y.len() != M || u.len() != model.input_dim() {
+            return out;
+        }
+        let predicted = model.f(&model.healthy_state(*rates_prev), u);
+        for i in 0..3 {
+            out[i] = y[i] - predicted[i];
+        }
+        if M == 4 {
+            let now = model.healthy_state([y[0], y[1], y[2]]);
+            let h = model.h_matrix(u) * now + model.h_offset(u);
+            out[3] = y[3] - h[3];
+        } else {
+            out[3] = 0.0;
+        }
+        out
     }
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate {
         let l = self.actuators();

@@ -131,11 +131,17 @@ pub fn run_vehicle_scenario(
     let mut traces = [Trace::default(), Trace::default()];
     let mut truth = Trace::default();
     let watch = target.unwrap_or(0);
+    let mut rates_prev: Option<[f64; 3]> = None;
     for k in 0..steps {
         let s = sim.step();
         let t0 = Instant::now();
         let res = filters.step(&s.u[..l], &s.y[..m]);
         nanos += t0.elapsed().as_nanos();
+        if let Some(prev) = rates_prev {
+            let r = filters.healthy_residual(&prev, &s.u[..l], &s.y[..m]);
+            diag.observe(s.t, &r, &s.u[..l]);
+        }
+        rates_prev = Some([s.y[0], s.y[1], s.y[2]]);
         for (f, r) in res.iter().enumerate() {
             if r.is_err() {
                 errors[f] += 1;

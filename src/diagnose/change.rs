@@ -1,0 +1,309 @@
+//! Which actuator changed, how and since when, read from the data rather than from the
+//! filters' priors: a generalised likelihood ratio test with an unknown change time (Willsky &
+//! Jones 1976) on the healthy model's one-step residual.
+//!
+//! The residual `r_k = y_k - ŷ_k(healthy)` (rows divided by the noise the filters assume, as in
+//! [`crate::estimate::vehicle::weighted_effects`]) of a change of actuator `j` since step `τ` is
+//! `b_j s_k` with `b_j` its weighted effect per unit of effective output and `s_k` the change of
+//! that output, one unknown `θ` per hypothesis:
+//! - gain: `s_k = (γ - 1) u_k` (`θ = γ - 1`): a loss of effectiveness;
+//! - offset: `s_k = δ` (`θ = δ`): a bias;
+//! - stuck: the output stays at `θ` whatever the command, `s_k = θ - u_k`.
+//!
+//! Each is linear in `θ`, so one backwards pass over the stored residuals gives, for every
+//! change time at once, the least-squares `θ` and the drop of the residual sum of squares. The
+//! hypothesis (actuator, kind, change time) with the largest drop is the reading. Unlike the
+//! filters' gamma and delta, which a hover leaves free to trade along `γ u + δ` and which their
+//! priors then settle (motors fail low), the three kinds differ in how the output follows the
+//! command since the change, which the fit sees directly; and a motor stuck above what the
+//! controller wants is not mistaken for the opposite motor losing thrust (they differ in the
+//! command pattern and in a_z, which the fit weighs).
+
+use crate::model::MAX_ACTUATORS;
+
+/// How an actuator's effective output changed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChangeKind {
+    Gain,
+    Offset,
+    Stuck,
+}
+
+/// The best-fitting change and how much better it fits than the alternatives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    pub actuator: usize,
+    pub kind: ChangeKind,
+    /// γ (gain), δ (offset) or the stuck output (stuck), normalised command units.
+    pub value: f64,
+    /// Time of the first sample of the changed stretch.
+    pub since: f64,
+    /// Samples in the changed stretch.
+    pub samples: usize,
+    /// Drop of the weighted residual sum of squares that the change explains.
+    pub drop: f64,
+    /// Residual variance per row left in the changed stretch by the fit.
+    pub noise_var: f64,
+    /// The best drop of another kind of change of the same actuator.
+    pub next_kind_drop: f64,
+    /// The best drop of any change of another actuator.
+    pub next_actuator_drop: f64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    t: f64,
+    r: [f64; 4],
+    u: [f64; MAX_ACTUATORS],
+}
+
+/// The stored residuals (a ring over the last `capacity` samples) and the test.
+#[derive(Debug, Clone)]
+pub struct ChangeTest {
+    effects: Vec<[f64; 4]>,
+    /// 1 / the noise standard deviation of each row (0 for a row not measured).
+    weights: [f64; 4],
+    rows: usize,
+    buf: Vec<Entry>,
+    head: usize,
+    len: usize,
+    /// The shortest changed stretch considered (samples).
+    min_samples: usize,
+}
+
+impl ChangeTest {
+    /// `effects[j]`: actuator j's weighted effect per unit of effective output, `weights`: the
+    /// inverse noise std of each measurement row (`rows` of them: 3, or 4 with a_z),
+    /// `capacity`: samples kept, `min_samples`: the shortest stretch a change is fitted on.
+    pub fn new(
+        effects: Vec<[f64; 4]>,
+        weights: [f64; 4],
+        rows: usize,
+        capacity: usize,
+        min_samples: usize,
+    ) -> Self {
+        let capacity = capacity.max(2);
+        Self {
+            effects,
+            weights,
+            rows: rows.min(4),
+            buf: vec![
+                Entry {
+                    t: 0.0,
+                    r: [0.0; 4],
+                    u: [0.0; MAX_ACTUATORS],
+                };
+                capacity
+            ],
+            head: 0,
+            len: 0,
+            min_samples: min_samples.max(2),
+        }
+    }
+
+    /// Store one step's unweighted residual of the healthy model and the commands that acted.
+    /// A non-finite value breaks the record: what came before is dropped.
+    pub fn push(&mut self, t: f64, residual: &[f64; 4], u: &[f64]) {
+        let l = self.effects.len().min(u.len());
+        let finite = residual[..self.rows].iter().all(|v| v.is_finite())
+            && u[..l].iter().all(|v| v.is_finite())
+            && t.is_finite();
+        if !finite {
+            self.clear();
+            return;
+        }
+        let mut e = Entry {
+            t,
+            r: [0.0; 4],
+            u: [0.0; MAX_ACTUATORS],
+        };
+        for ((r, x), w) in
+            e.r.iter_mut()
+                .zip(residual)
+                .zip(&self.weights)
+                .take(self.rows)
+        {
+            *r = x * w;
+        }
+        e.u[..l].copy_from_slice(&u[..l]);
+        let cap = self.buf.len();
+        self.buf[self.head] = e;
+        self.head = (self.head + 1) % cap;
+        self.len = (self.len + 1).min(cap);
+    }
+
+    /// Forget the stored residuals (a gap in the telemetry, a restart).
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The best change over the stored stretch, `None` with too few samples. No allocation.
+    pub fn evaluate(&self) -> Option<Reading> {
+        if self.len < self.min_samples {
+            return None;
+        }
+        let cap = self.buf.len();
+        let l = self.effects.len();
+        // Per actuator and kind: (drop, samples, θ, residual variance).
+        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        for (j, b) in self.effects.iter().enumerate() {
+            // Sums over the changed stretch, extended one sample back per iteration.
+            let (mut base, mut gy, mut gx, mut oy, mut ox, mut bbu) =
+                (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            for n in 1..=self.len {
+                let e = &self.buf[(self.head + cap - n) % cap];
+                let u = e.u[j];
+                for (&bi, &ri) in b.iter().zip(&e.r).take(self.rows) {
+                    base += ri * ri;
+                    gy += bi * u * ri;
+                    gx += bi * bi * u * u;
+                    oy += bi * ri;
+                    ox += bi * bi;
+                    bbu += bi * bi * u;
+                }
+                if n < self.min_samples {
+                    continue;
+                }
+                let rows = (n * self.rows) as f64;
+                let mut consider = |k: usize, drop: f64, theta: f64| {
+                    if drop.is_finite() && drop > best[j][k].0 {
+                        best[j][k] = (drop, n, theta, ((base - drop) / rows).max(0.0));
+                    }
+                };
+                if gx > 0.0 {
+                    consider(0, gy * gy / gx, 1.0 + gy / gx);
+                }
+                if ox > 0.0 {
+                    consider(1, oy * oy / ox, oy / ox);
+                    // Stuck at θ: r = b (θ - u); the sum of squares left is Σ(r + b u)² - (Σ b(r + b u))²/Σb²,
+                    // and Σ(r + b u)² = base + 2 gy + gx.
+                    let sy = oy + bbu;
+                    consider(2, sy * sy / ox - 2.0 * gy - gx, sy / ox);
+                }
+            }
+        }
+        let kinds = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
+        let mut top: Option<(usize, usize)> = None;
+        for (j, row) in best.iter().enumerate().take(l) {
+            for (k, h) in row.iter().enumerate() {
+                if h.1 > 0 && top.is_none_or(|(tj, tk)| h.0 > best[tj][tk].0) {
+                    top = Some((j, k));
+                }
+            }
+        }
+        let (j, k) = top?;
+        let h = best[j][k];
+        let next_kind_drop = (0..3)
+            .filter(|&kk| kk != k)
+            .map(|kk| best[j][kk].0)
+            .fold(0.0, f64::max);
+        let next_actuator_drop = (0..l)
+            .filter(|&jj| jj != j)
+            .flat_map(|jj| best[jj].iter().map(|x| x.0))
+            .fold(0.0, f64::max);
+        let first = &self.buf[(self.head + cap - h.1) % cap];
+        Some(Reading {
+            actuator: j,
+            kind: kinds[k],
+            value: h.2,
+            since: first.t,
+            samples: h.1,
+            drop: h.0,
+            noise_var: h.3,
+            next_kind_drop,
+            next_actuator_drop,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::rng::Rng;
+
+    /// Three actuators on three axes (one of them mixing two), unit weights.
+    fn effects() -> Vec<[f64; 4]> {
+        vec![
+            [1.0, 0.0, 0.2, 0.0],
+            [0.0, 1.0, -0.2, 0.0],
+            [0.6, 0.6, 0.3, 0.0],
+        ]
+    }
+
+    /// Residuals of a change of actuator `j` from step `onset` on, with white noise and
+    /// commands varying about 0.5; returns the test after `steps`.
+    fn run(j: usize, kind: ChangeKind, theta: f64, onset: usize, steps: usize) -> ChangeTest {
+        let b = effects();
+        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10);
+        let mut rng = Rng::new(7);
+        for k in 0..steps {
+            let t = k as f64 * 0.02;
+            let u: Vec<f64> = (0..3)
+                .map(|i| 0.5 + 0.1 * (t * (1.3 + i as f64)).sin())
+                .collect();
+            let s = if k >= onset {
+                match kind {
+                    ChangeKind::Gain => (theta - 1.0) * u[j],
+                    ChangeKind::Offset => theta,
+                    ChangeKind::Stuck => theta - u[j],
+                }
+            } else {
+                0.0
+            };
+            let mut r = [0.0; 4];
+            for i in 0..3 {
+                r[i] = b[j][i] * s + 0.05 * rng.normal();
+            }
+            test.push(t, &r, &u);
+        }
+        test
+    }
+
+    #[test]
+    fn each_kind_of_change_is_read_with_its_actuator_size_and_onset() {
+        for (j, kind, theta) in [
+            (0, ChangeKind::Gain, 0.6),
+            (1, ChangeKind::Offset, -0.1),
+            (2, ChangeKind::Stuck, 0.45),
+        ] {
+            let test = run(j, kind, theta, 200, 350);
+            let r = test.evaluate().expect("a reading");
+            assert_eq!((r.actuator, r.kind), (j, kind), "{r:?}");
+            assert!((r.value - theta).abs() < 0.02, "{r:?}");
+            // Onset at step 200 = 4.0 s.
+            assert!((r.since - 4.0).abs() <= 0.1, "{r:?}");
+            assert!(r.drop > r.next_kind_drop && r.drop > r.next_actuator_drop);
+            // The fit leaves the noise: variance 0.05² per row.
+            assert!((r.noise_var / 0.0025 - 1.0).abs() < 0.3, "{r:?}");
+        }
+    }
+
+    #[test]
+    fn noise_alone_explains_little() {
+        let test = run(0, ChangeKind::Offset, 0.0, 0, 400);
+        let r = test.evaluate().expect("a reading");
+        // Under no change the drop is a maximum of chi-square(1) variables in noise units.
+        assert!(r.drop / r.noise_var < 30.0, "{r:?}");
+    }
+
+    #[test]
+    fn a_non_finite_residual_drops_the_record_and_too_few_samples_read_nothing() {
+        let mut test = run(0, ChangeKind::Gain, 0.5, 100, 300);
+        assert!(test.evaluate().is_some());
+        test.push(9.0, &[f64::NAN, 0.0, 0.0, 0.0], &[0.5; 3]);
+        assert!(test.is_empty());
+        assert_eq!(test.evaluate(), None);
+        for k in 0..5 {
+            test.push(10.0 + k as f64 * 0.02, &[0.1, 0.0, 0.0, 0.0], &[0.5; 3]);
+        }
+        assert_eq!(test.evaluate(), None);
+    }
+}
