@@ -402,6 +402,8 @@ impl VehiclePipeline {
                     return;
                 };
                 let Some(prev_u) = r.prev_u.replace(u) else {
+                    // A new take-off (or the first sample): no residual spans what came before.
+                    r.diag.residual_gap();
                     r.last_t = s.t;
                     r.u_pushed = 0;
                     r.rates_prev = [s.rates; 2];
@@ -450,7 +452,11 @@ impl VehiclePipeline {
                 r.rates_prev = [r.rates_prev[1], s.rates];
                 let prev_u = acting;
                 let res = r.filters.step(&input[..n_in], &y[..r.m]);
-                if !gap {
+                // Only once the commands that acted and the increment are this flight's own, one
+                // period apart (a gap or take-off leaves stand-ins for `delay` steps, and an
+                // identified model's increment spans the gap for one more).
+                let own_inputs = r.u_pushed > r.delay.max(if r.exogenous { 2 } else { 0 });
+                if !gap && own_inputs {
                     let residual =
                         r.filters
                             .healthy_residual(&rates_before, &input[..n_in], &y[..r.m]);

@@ -44,10 +44,32 @@ pub struct Reading {
     pub drop: f64,
     /// Residual variance per row left in the changed stretch by the fit.
     pub noise_var: f64,
+    /// Lag-one autocorrelation of the residual the fit leaves in the changed stretch.
+    pub autocorrelation: f64,
+    /// The share of the changed stretch's residual sum of squares the change explains.
+    pub explained: f64,
+    /// Mean and standard deviation of the actuator's command over the changed stretch: what
+    /// tells the kinds apart is how the output follows its variation.
+    pub command_mean: f64,
+    pub command_std: f64,
     /// The best drop of another kind of change of the same actuator.
     pub next_kind_drop: f64,
     /// The best drop of any change of another actuator.
     pub next_actuator_drop: f64,
+}
+
+impl Reading {
+    /// How much better this reading fits than an alternative whose drop is `other`, as a log
+    /// likelihood ratio (×2) in the residual's own noise, counting only the independent
+    /// samples: a residual with lag-one autocorrelation ρ holds about (1-ρ)/(1+ρ) of them
+    /// (an AR(1) sequence's variance inflation). ρ below 0 counts as 0.
+    pub fn margin_over(&self, other: f64) -> f64 {
+        if self.noise_var.is_nan() || self.noise_var <= 0.0 {
+            return 0.0;
+        }
+        let rho = self.autocorrelation.clamp(0.0, 0.999);
+        (self.drop - other) / self.noise_var * (1.0 - rho) / (1.0 + rho)
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -153,14 +175,18 @@ impl ChangeTest {
         let cap = self.buf.len();
         let l = self.effects.len();
         // Per actuator and kind: (drop, samples, θ, residual variance).
-        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        let mut best =
+            [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         for (j, b) in self.effects.iter().enumerate() {
             // Sums over the changed stretch, extended one sample back per iteration.
             let (mut base, mut gy, mut gx, mut oy, mut ox, mut bbu) =
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let (mut su, mut suu) = (0.0, 0.0);
             for n in 1..=self.len {
                 let e = &self.buf[(self.head + cap - n) % cap];
                 let u = e.u[j];
+                su += u;
+                suu += u * u;
                 for (&bi, &ri) in b.iter().zip(&e.r).take(self.rows) {
                     base += ri * ri;
                     gy += bi * u * ri;
@@ -175,7 +201,18 @@ impl ChangeTest {
                 let rows = (n * self.rows) as f64;
                 let mut consider = |k: usize, drop: f64, theta: f64| {
                     if drop.is_finite() && drop > best[j][k].0 {
-                        best[j][k] = (drop, n, theta, ((base - drop) / rows).max(0.0));
+                        let explained = if base > 0.0 { drop / base } else { 0.0 };
+                        let mean = su / n as f64;
+                        let sd = (suu / n as f64 - mean * mean).max(0.0).sqrt();
+                        best[j][k] = (
+                            drop,
+                            n,
+                            theta,
+                            ((base - drop) / rows).max(0.0),
+                            explained,
+                            mean,
+                            sd,
+                        );
                     }
                 };
                 if gx > 0.0 {
@@ -210,7 +247,36 @@ impl ChangeTest {
             .flat_map(|jj| best[jj].iter().map(|x| x.0))
             .fold(0.0, f64::max);
         let first = &self.buf[(self.head + cap - h.1) % cap];
+        // Lag-one autocorrelation of what the fit leaves, pooled over the rows: gusts and model
+        // error make it coloured, and a coloured residual holds fewer independent samples.
+        let b = &self.effects[j];
+        let fitted = |e: &Entry, i: usize| -> f64 {
+            let u = e.u[j];
+            let s = match kinds[k] {
+                ChangeKind::Gain => (h.2 - 1.0) * u,
+                ChangeKind::Offset => h.2,
+                ChangeKind::Stuck => h.2 - u,
+            };
+            e.r[i] - b[i] * s
+        };
+        let (mut lag, mut sq) = (0.0, 0.0);
+        for n in 1..=h.1 {
+            let e = &self.buf[(self.head + cap - n) % cap];
+            for i in 0..self.rows {
+                let x = fitted(e, i);
+                sq += x * x;
+                if n < h.1 {
+                    lag += x * fitted(&self.buf[(self.head + cap - n - 1) % cap], i);
+                }
+            }
+        }
+        let autocorrelation = if sq > 0.0 {
+            (lag / sq).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
         Some(Reading {
+            autocorrelation,
             actuator: j,
             kind: kinds[k],
             value: h.2,
@@ -218,6 +284,9 @@ impl ChangeTest {
             samples: h.1,
             drop: h.0,
             noise_var: h.3,
+            explained: h.4,
+            command_mean: h.5,
+            command_std: h.6,
             next_kind_drop,
             next_actuator_drop,
         })
@@ -284,6 +353,81 @@ mod tests {
             // The fit leaves the noise: variance 0.05² per row.
             assert!((r.noise_var / 0.0025 - 1.0).abs() < 0.3, "{r:?}");
         }
+    }
+
+    #[test]
+    fn the_ring_keeps_the_latest_samples_and_a_change_older_than_it_starts_at_its_oldest() {
+        // Capacity 400: after 600 steps with the change at 450 the onset is still found; with
+        // the change at 100 the whole stored stretch is the changed one.
+        let test = run(1, ChangeKind::Gain, 0.7, 450, 600);
+        let r = test.evaluate().unwrap();
+        assert_eq!((r.actuator, r.kind), (1, ChangeKind::Gain), "{r:?}");
+        assert!((r.since - 9.0).abs() <= 0.1 && r.samples <= 160, "{r:?}");
+        let test = run(1, ChangeKind::Gain, 0.7, 100, 600);
+        let r = test.evaluate().unwrap();
+        assert_eq!(test.len(), 400);
+        assert_eq!(r.samples, 400, "{r:?}");
+        assert!((r.since - 200.0 * 0.02).abs() < 1e-9, "{r:?}");
+        assert!((r.value - 0.7).abs() < 0.02, "{r:?}");
+    }
+
+    #[test]
+    fn white_noise_gives_no_decisive_margin() {
+        // What the diagnosis acts on: the best reading's margin over any other actuator and
+        // over the other kinds, in independent samples. Under no change both stay far below
+        // the 20 the diagnosis asks for.
+        for seed in 1..20 {
+            let b = effects();
+            let mut test = ChangeTest::new(b, [1.0; 4], 3, 300, 10);
+            let mut rng = Rng::new(seed);
+            for k in 0..300 {
+                let t = k as f64 * 0.02;
+                let u = [
+                    0.5 + 0.1 * (t * 1.3).sin(),
+                    0.5 + 0.1 * (t * 2.3).sin(),
+                    0.5,
+                ];
+                let r = [rng.normal(), rng.normal(), rng.normal(), 0.0];
+                test.push(t, &r, &u);
+            }
+            let r = test.evaluate().unwrap();
+            assert!(
+                r.margin_over(r.next_actuator_drop) < 20.0
+                    && r.margin_over(r.next_kind_drop) < 20.0,
+                "seed {seed}: {r:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn coloured_residuals_count_fewer_independent_samples() {
+        let r = Reading {
+            actuator: 0,
+            kind: ChangeKind::Gain,
+            value: 0.5,
+            since: 0.0,
+            samples: 100,
+            drop: 120.0,
+            noise_var: 1.0,
+            autocorrelation: 0.0,
+            explained: 0.5,
+            command_mean: 0.5,
+            command_std: 0.1,
+            next_kind_drop: 100.0,
+            next_actuator_drop: 0.0,
+        };
+        assert!((r.margin_over(r.next_kind_drop) - 20.0).abs() < 1e-9);
+        let coloured = Reading {
+            autocorrelation: 0.8,
+            ..r
+        };
+        // (1 - 0.8) / (1 + 0.8) of the samples are independent.
+        assert!((coloured.margin_over(coloured.next_kind_drop) - 20.0 / 9.0).abs() < 1e-9);
+        let anti = Reading {
+            autocorrelation: -0.5,
+            ..r
+        };
+        assert!((anti.margin_over(anti.next_kind_drop) - 20.0).abs() < 1e-9);
     }
 
     #[test]

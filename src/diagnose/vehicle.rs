@@ -316,14 +316,13 @@ const CHANGE_MIN_S: f64 = 0.2;
 /// At most this many residuals are kept, whatever the rate (the test's cost is linear in it).
 const CHANGE_MAX_SAMPLES: usize = 600;
 
-/// The change test's answer counts when the best change beats the alternative by this many
-/// times the residual variance it leaves (a likelihood ratio of e^10 were the noise white):
-/// any change of another actuator for the isolation (the attribution then starts from its
-/// actuator), another kind of change of the same actuator for the class.
+/// The change test's answer counts when the best change beats the alternative by this much
+/// (`Reading::margin_over`: twice the log likelihood ratio over the independent samples, so
+/// e^10): any change of another actuator for the isolation (the attribution then starts from
+/// its actuator), another kind of change of the same actuator for the class.
 const DATA_MARGIN: f64 = 20.0;
 
-/// The class also waits for this much of the changed stretch (s): gusts make the residual
-/// coloured, so a short stretch holds fewer independent samples than it counts.
+/// The class also waits for this much of the changed stretch (s).
 const CLASS_MIN_S: f64 = 1.0;
 
 /// Seconds of `u_quiet` std snapshots kept (see `ActuatorState::quiet_sd`).
@@ -418,13 +417,19 @@ impl Diagnoser {
     fn data_class(&self, j: usize) -> Option<FaultClass> {
         let r = self.reading.filter(|r| r.actuator == j)?;
         let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
-        if !long || r.drop - r.next_kind_drop < DATA_MARGIN * r.noise_var {
+        if !long || r.margin_over(r.next_kind_drop) < DATA_MARGIN {
             return None;
         }
         let p = &self.params;
         match r.kind {
             ChangeKind::Gain if r.value < 1.0 - p.loe_tau => Some(FaultClass::LossOfEffectiveness),
-            ChangeKind::Offset if r.value.abs() > p.bias_tau => Some(FaultClass::Bias),
+            // Not for a motor or throttle: hovering, its command barely moves, and a gain and an
+            // offset differ only through that; on the SITL quad's motor gain fault the residual
+            // of a model that is not the vehicle favoured an offset for seconds. The motor prior
+            // (and the decision's note on what else fits) stands there.
+            ChangeKind::Offset if r.value.abs() > p.bias_tau && self.is_angle[j] => {
+                Some(FaultClass::Bias)
+            }
             ChangeKind::Stuck => Some(FaultClass::Stuck),
             _ => None,
         }
@@ -438,7 +443,8 @@ impl Diagnoser {
                 && self.is_motor[r.actuator]
                 && matches!(r.kind, ChangeKind::Offset | ChangeKind::Stuck)
                 && self.actuators[r.actuator].active.is_some()
-                && r.drop - r.next_actuator_drop >= DATA_MARGIN * r.noise_var
+                && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
+                && self.data_class(r.actuator).is_some()
         })
     }
 
@@ -450,7 +456,21 @@ impl Diagnoser {
             ChangeKind::Offset => format!("an offset of {:+.3}", r.value),
             ChangeKind::Stuck => format!("an output stuck at {:.3}", r.value),
         };
-        Some(format!("since t={:.2} s the data fit {what} best", r.since))
+        // A change older than the stored stretch started before its first sample.
+        let since = if r.samples >= self.change.len() {
+            "since at least"
+        } else {
+            "since"
+        };
+        let how = if self.data_class(j).is_some() {
+            "clearly"
+        } else {
+            "so far (not clearly)"
+        };
+        Some(format!(
+            "{since} t={:.2} s the data fit {what} best, {how}",
+            r.since
+        ))
     }
 
     /// Three or more motors moving together is thrust mismatch (a payload, a sagging battery,
@@ -484,7 +504,8 @@ impl Diagnoser {
 
     /// Attribute the deviations `e` (one per actuator) in the observable space `v = Σ b_j e_j`
     /// by orthogonal matching pursuit: the actuator whose effect explains most of what is still
-    /// unexplained joins the explanation, all joined ones are refitted together, and this stops
+    /// unexplained (first the `preferred` one, the change test's, if it explains at least
+    /// `explain_min`) joins the explanation, all joined ones are refitted together, and this stops
     /// when the next one's share would be under `explain_min`. Joined actuators get
     /// their fitted deviation, the others their share of the remainder.
     ///
@@ -538,19 +559,23 @@ impl Diagnoser {
             };
             // The actuator the change test names comes first: the data settled what the prior
             // would have guessed.
-            let cand = match preferred.filter(|&p| k == 0 && p < l) {
-                Some(p) => Some((p, share(&b[p], &rest))),
-                None => (0..l)
+            // (Unless it explains too little of this statistic: then the usual choice.)
+            let first = preferred
+                .filter(|&p| k == 0 && p < l)
+                .map(|p| (p, share(&b[p], &rest)))
+                .filter(|(_, sp)| sp.abs() >= self.params.explain_min);
+            let cand = first.or_else(|| {
+                (0..l)
                     .filter(|j| !joined[..k].contains(j))
                     .map(|j| (j, share(&b[j], &rest)))
-                    .max_by(|p, q| energy(p.0, p.1).total_cmp(&energy(q.0, q.1))),
-            };
+                    .max_by(|p, q| energy(p.0, p.1).total_cmp(&energy(q.0, q.1)))
+            });
             let Some((j, sj)) = cand else { break };
             // Also the first: what no single actuator explains enough of is model error.
             if sj.abs() < self.params.explain_min {
                 break;
             }
-            if k == 0 && sj < 0.0 && self.is_motor[j] && preferred.is_none() {
+            if k == 0 && sj < 0.0 && self.is_motor[j] && first.is_none() {
                 let unweighted = |m: usize| {
                     let s = share(&b[m], &rest);
                     (s > 0.0 && self.is_motor[m]).then(|| s * s * dot(&b[m], &b[m]))
@@ -728,7 +753,7 @@ impl Diagnoser {
         };
         let preferred = self
             .reading
-            .filter(|r| r.drop - r.next_actuator_drop >= DATA_MARGIN * r.noise_var)
+            .filter(|r| r.margin_over(r.next_actuator_drop) >= DATA_MARGIN)
             .map(|r| r.actuator);
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
         let mut prior_decided = [None; 2];
@@ -1024,21 +1049,18 @@ impl Diagnoser {
         let p = &self.params;
         let st = &self.actuators[j];
         let e = st.channels[0].last;
-        let drifting = self.drifting(j);
-        // The data's reading first (a steadily moving offset is a drift).
+        // A steadily moving offset is a drift whatever fits best over the stretch (under a
+        // controller that follows it, a ramp fits a stuck output too); then the data's kind,
+        // then the MIT-UKF's estimates.
+        if self.drifting(j) {
+            return FaultClass::Drift;
+        }
         if let Some(c) = self.data_class(j) {
-            return if c == FaultClass::Bias && drifting {
-                FaultClass::Drift
-            } else {
-                c
-            };
+            return c;
         }
         let gamma_contains_one = e.gamma_lo <= 1.0 && 1.0 <= e.gamma_hi;
         if e.gamma.abs() < p.stuck_gamma && !gamma_contains_one {
             return FaultClass::Stuck;
-        }
-        if drifting {
-            return FaultClass::Drift;
         }
         if e.gamma < 1.0 - p.loe_tau
             && e.delta.abs() < p.bias_tau.max(0.5 * (1.0 - e.gamma) * st.u.mean.abs())
@@ -1203,7 +1225,7 @@ mod tests {
             d.explain(&[0.0, 0.0, 0.0, 0.0, 0.0, -0.2], &mut out, Some(4)),
             None
         );
-        assert!(out[4] > 0.15 && out[5].abs() < 0.05, "{out:?}");
+        assert!(out[4] > 0.15 && out[5].abs() < 0.5 * out[4], "{out:?}");
     }
 
     #[test]

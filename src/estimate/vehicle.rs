@@ -444,3 +444,81 @@ pub fn build(profile: &Profile, dt: f64) -> Result<Box<dyn VehicleFilters>, Buil
         (2, 3, 7, 15), (3, 3, 9, 19), (4, 3, 11, 23), (6, 3, 15, 31), (8, 3, 19, 39),
         (2, 4, 7, 15), (3, 4, 9, 19), (4, 4, 11, 23), (6, 4, 15, 31), (8, 4, 19, 39))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Model;
+
+    #[test]
+    #[allow(clippy::needless_range_loop)] // actuator j indexes the effects and the state
+    fn the_healthy_residual_of_an_offset_is_its_weighted_effect_unweighted() {
+        // What the change test relies on: the healthy model's residual of a vehicle whose
+        // actuator j gives `s` more than commanded is `s` times `weighted_effects[j]` divided
+        // by `residual_weights`, row by row (rates and a_z), and zero without a change.
+        let dt = 0.02;
+        for name in ["quad-x", "hexa-x", "plane", "heli-h3-120"] {
+            let profile = Profile::resolve(name).unwrap();
+            let filters = build(&profile, dt).unwrap();
+            let (l, m) = (filters.actuators(), filters.measurements());
+            let effects = weighted_effects(&profile, dt);
+            let weights = residual_weights(&profile, dt);
+            let u: Vec<f64> = (0..l).map(|j| 0.3 + 0.05 * j as f64).collect();
+            let prev = [0.1, -0.05, 0.02];
+            for j in 0..l {
+                let s = 0.1;
+                let y = match (l, m) {
+                    (4, 4) => truth::<11, 4>(&profile, dt, &prev, &u, j, s),
+                    (6, 4) => truth::<15, 4>(&profile, dt, &prev, &u, j, s),
+                    (3, 3) => truth::<9, 3>(&profile, dt, &prev, &u, j, s),
+                    (4, 3) => truth::<11, 3>(&profile, dt, &prev, &u, j, s),
+                    other => panic!("{other:?}"),
+                };
+                let healthy = match (l, m) {
+                    (4, 4) => truth::<11, 4>(&profile, dt, &prev, &u, j, 0.0),
+                    (6, 4) => truth::<15, 4>(&profile, dt, &prev, &u, j, 0.0),
+                    (3, 3) => truth::<9, 3>(&profile, dt, &prev, &u, j, 0.0),
+                    (4, 3) => truth::<11, 3>(&profile, dt, &prev, &u, j, 0.0),
+                    other => panic!("{other:?}"),
+                };
+                let zero = filters.healthy_residual(&prev, &u, &healthy[..m]);
+                assert!(
+                    zero[..m].iter().all(|r| r.abs() < 1e-12),
+                    "{name}: {zero:?}"
+                );
+                let r = filters.healthy_residual(&prev, &u, &y[..m]);
+                for i in 0..m {
+                    let expected = s * effects[j][i] / weights[i];
+                    assert!(
+                        (r[i] - expected).abs() < 1e-9 * (1.0 + expected.abs()),
+                        "{name} actuator {j} row {i}: {} vs {expected}",
+                        r[i]
+                    );
+                }
+            }
+        }
+    }
+
+    /// `[p, q, r(, a_z)]` one step after `prev` with actuator j's offset at `s`.
+    fn truth<const N: usize, const M: usize>(
+        profile: &Profile,
+        dt: f64,
+        prev: &[f64; 3],
+        u: &[f64],
+        j: usize,
+        s: f64,
+    ) -> [f64; 4] {
+        let model = RateModel::<N, M>::new(&profile.rate_params(), dt).unwrap();
+        let l = model.actuators();
+        let mut x = model.healthy_state(*prev);
+        x[3 + l + j] = s;
+        let next = model.f(&x, u);
+        let mut y = [0.0; 4];
+        y[..3].copy_from_slice(&[next[0], next[1], next[2]]);
+        if M == 4 {
+            let h = model.h_matrix(u) * next + model.h_offset(u);
+            y[3] = h[3];
+        }
+        y
+    }
+}
