@@ -435,17 +435,16 @@ impl Diagnoser {
         }
     }
 
-    /// The change test names, with its isolation margin, a motor other than `j` with a fault
-    /// in force that is an offset or a stuck output.
-    fn data_names_motor_offset(&self, j: usize) -> bool {
-        self.reading.is_some_and(|r| {
-            r.actuator != j
-                && self.is_motor[r.actuator]
-                && matches!(r.kind, ChangeKind::Offset | ChangeKind::Stuck)
-                && self.actuators[r.actuator].active.is_some()
-                && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
-                && self.data_class(r.actuator).is_some()
-        })
+    /// The motor the change test pins an offset or a stuck output on, with its isolation
+    /// margin.
+    fn pinned_motor_offset(&self) -> Option<usize> {
+        self.reading
+            .filter(|r| {
+                self.is_motor[r.actuator]
+                    && matches!(r.kind, ChangeKind::Offset | ChangeKind::Stuck)
+                    && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
+            })
+            .map(|r| r.actuator)
     }
 
     /// What the change test reads for actuator `j`, for a decision's detail.
@@ -821,6 +820,25 @@ impl Diagnoser {
         }
         // Isolation is in the deviations themselves (`explain`): an actuator alarms only on what
         // the measurements attribute to it once the others' effects are accounted for.
+        // Which filters alarm on each actuator, as bit masks (no allocation unless a decision
+        // is made). A motor's offset or stuck output, which the filters hold near zero by
+        // design (motors fail low), spreads over the other motors' gains: while the data pin
+        // it on its motor, the alarms of other motors without a fault in force count as that
+        // motor's (and are listed with it, `also`), not as faults of their own.
+        let mut alarms = [0u8; crate::model::MAX_ACTUATORS];
+        for (bits, st) in alarms.iter_mut().zip(&self.actuators) {
+            *bits = (0..2)
+                .filter(|&f| st.channels[f].alarm)
+                .fold(0, |m, f| m | (1 << f));
+        }
+        if let Some(m) = self.pinned_motor_offset() {
+            for j in (0..l).filter(|&j| j != m && self.is_motor[j]) {
+                if self.actuators[j].active.is_none() {
+                    alarms[m] |= alarms[j];
+                    alarms[j] = 0;
+                }
+            }
+        }
         for j in 0..l {
             // Gating: say once when gain and bias cannot be told apart (and again after the
             // command has been exciting in between).
@@ -849,10 +867,7 @@ impl Diagnoser {
                 ));
                 out.push(d);
             }
-            // Which filters alarm, as a bit mask: no allocation unless a decision is made.
-            let filters: u8 = (0..2)
-                .filter(|&f| self.actuators[j].channels[f].alarm)
-                .fold(0, |m, f| m | (1 << f));
+            let filters = alarms[j];
             let st = &self.actuators[j];
             let cleared = st.active.is_some() && filters == 0;
             if cleared {
@@ -875,12 +890,6 @@ impl Diagnoser {
                 FaultClass::Unclassified
             };
             let st = &self.actuators[j];
-            // A motor's offset or stuck output, which the filters hold near zero by design
-            // (motors fail low), spreads over the other motors' estimates: while the data pin
-            // it on its motor, their alarms are listed with it (`also`), not decided apart.
-            if st.active.is_none() && self.is_motor[j] && self.data_names_motor_offset(j) {
-                continue;
-            }
             match (st.active, class) {
                 (None, c) => {
                     let mut d = self.decision(t, j, Event::Fault, Some(c), filters);
@@ -1290,6 +1299,64 @@ mod tests {
         let r = d.reading().expect("a reading while the fault is in force");
         assert_eq!((r.actuator, r.kind), (4, ChangeKind::Stuck));
         assert!((r.since - 8.0).abs() < 0.1, "{r:?}");
+    }
+
+    #[test]
+    fn other_motors_alarms_under_a_stuck_motor_the_data_pin_are_listed_not_decided() {
+        // As above, and the filters also spread the stuck motor over motor 2's gain (0.8).
+        // Without the residuals (no change test) motor 2 gets a fault decision of its own;
+        // with them, while the data pin motor 5 as stuck, it does not.
+        let p = Profile::resolve("hexa-x").unwrap();
+        let dt = 0.02;
+        let effects = crate::estimate::vehicle::weighted_effects(&p, dt);
+        let weights = crate::estimate::vehicle::residual_weights(&p, dt);
+        let healthy = healthy_estimate(0.02);
+        let run = |with_data: bool| -> Vec<Decision> {
+            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, dt);
+            let mut rng = crate::sim::rng::Rng::new(5);
+            let (mut decisions, mut out) = (vec![], vec![]);
+            for k in 0..600 {
+                let t = k as f64 * dt;
+                let mut u = [0.0; 6];
+                for (i, x) in u.iter_mut().enumerate() {
+                    *x = 0.5 + 0.04 * (t * (2.0 + i as f64)).sin();
+                }
+                let stuck = t >= 8.0;
+                let change = if stuck { 0.62 - u[4] } else { 0.0 };
+                if with_data {
+                    let mut residual = [0.0; 4];
+                    for (i, r) in residual.iter_mut().enumerate() {
+                        if weights[i] > 0.0 {
+                            *r = (effects[4][i] * change + 0.3 * rng.normal()) / weights[i];
+                        }
+                    }
+                    d.observe(t, &residual, &u);
+                }
+                let mut est = [healthy; 6];
+                if stuck {
+                    for (j, g) in [(5, 0.75), (1, 0.8)] {
+                        est[j].gamma = g;
+                        est[j].gamma_lo = g - 0.05;
+                        est[j].gamma_hi = g + 0.05;
+                    }
+                }
+                d.update(t, &u, &[&est, &est], &mut out);
+                decisions.append(&mut out);
+            }
+            decisions
+        };
+        let named = |ds: &[Decision], who: &str| {
+            ds.iter()
+                .any(|x| x.event == Event::Fault && x.actuator.as_deref() == Some(who))
+        };
+        let without = run(false);
+        assert!(named(&without, "motor2"), "{without:?}");
+        let with = run(true);
+        assert!(named(&with, "motor5"), "{with:?}");
+        assert!(
+            !named(&with, "motor2") && !named(&with, "motor6"),
+            "{with:?}"
+        );
     }
 
     #[test]
