@@ -867,7 +867,7 @@ impl Diagnoser {
                 ));
                 out.push(d);
             }
-            let filters = alarms[j];
+            let filters = alarms.get(j).copied().unwrap_or(0);
             let st = &self.actuators[j];
             let cleared = st.active.is_some() && filters == 0;
             if cleared {
