@@ -455,7 +455,7 @@ impl VehiclePipeline {
                 // Only once the commands that acted and the increment are this flight's own, one
                 // period apart (a gap or take-off leaves stand-ins for `delay` steps, and an
                 // identified model's increment spans the gap for one more).
-                let own_inputs = r.u_pushed > r.delay.max(if r.exogenous { 2 } else { 0 });
+                let own_inputs = r.u_pushed > (r.delay + 1).max(if r.exogenous { 2 } else { 0 });
                 if !gap && own_inputs {
                     let residual =
                         r.filters

@@ -46,12 +46,6 @@ pub struct Reading {
     pub noise_var: f64,
     /// Lag-one autocorrelation of the residual the fit leaves in the changed stretch.
     pub autocorrelation: f64,
-    /// The share of the changed stretch's residual sum of squares the change explains.
-    pub explained: f64,
-    /// Mean and standard deviation of the actuator's command over the changed stretch: what
-    /// tells the kinds apart is how the output follows its variation.
-    pub command_mean: f64,
-    pub command_std: f64,
     /// The best drop of another kind of change of the same actuator.
     pub next_kind_drop: f64,
     /// The best drop of any change of another actuator.
@@ -68,7 +62,8 @@ impl Reading {
             return 0.0;
         }
         let rho = self.autocorrelation.clamp(0.0, 0.999);
-        (self.drop - other) / self.noise_var * (1.0 - rho) / (1.0 + rho)
+        let m = (self.drop - other) / self.noise_var * (1.0 - rho) / (1.0 + rho);
+        if m.is_finite() { m } else { 0.0 }
     }
 }
 
@@ -175,18 +170,14 @@ impl ChangeTest {
         let cap = self.buf.len();
         let l = self.effects.len();
         // Per actuator and kind: (drop, samples, θ, residual variance).
-        let mut best =
-            [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         for (j, b) in self.effects.iter().enumerate() {
             // Sums over the changed stretch, extended one sample back per iteration.
             let (mut base, mut gy, mut gx, mut oy, mut ox, mut bbu) =
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-            let (mut su, mut suu) = (0.0, 0.0);
             for n in 1..=self.len {
                 let e = &self.buf[(self.head + cap - n) % cap];
                 let u = e.u[j];
-                su += u;
-                suu += u * u;
                 for (&bi, &ri) in b.iter().zip(&e.r).take(self.rows) {
                     base += ri * ri;
                     gy += bi * u * ri;
@@ -201,18 +192,7 @@ impl ChangeTest {
                 let rows = (n * self.rows) as f64;
                 let mut consider = |k: usize, drop: f64, theta: f64| {
                     if drop.is_finite() && drop > best[j][k].0 {
-                        let explained = if base > 0.0 { drop / base } else { 0.0 };
-                        let mean = su / n as f64;
-                        let sd = (suu / n as f64 - mean * mean).max(0.0).sqrt();
-                        best[j][k] = (
-                            drop,
-                            n,
-                            theta,
-                            ((base - drop) / rows).max(0.0),
-                            explained,
-                            mean,
-                            sd,
-                        );
+                        best[j][k] = (drop, n, theta, ((base - drop) / rows).max(0.0));
                     }
                 };
                 if gx > 0.0 {
@@ -284,9 +264,6 @@ impl ChangeTest {
             samples: h.1,
             drop: h.0,
             noise_var: h.3,
-            explained: h.4,
-            command_mean: h.5,
-            command_std: h.6,
             next_kind_drop,
             next_actuator_drop,
         })
@@ -410,9 +387,6 @@ mod tests {
             drop: 120.0,
             noise_var: 1.0,
             autocorrelation: 0.0,
-            explained: 0.5,
-            command_mean: 0.5,
-            command_std: 0.1,
             next_kind_drop: 100.0,
             next_actuator_drop: 0.0,
         };
@@ -428,6 +402,32 @@ mod tests {
             ..r
         };
         assert!((anti.margin_over(anti.next_kind_drop) - 20.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_residual_autocorrelation_is_measured_on_the_changed_stretch() {
+        // A gain change with AR(1) noise of coefficient φ on every row: the reading's lag-one
+        // autocorrelation is φ (0 for white noise), within sampling error.
+        for phi in [0.0f64, 0.5, 0.9] {
+            let b = effects();
+            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 2000, 10);
+            let mut rng = Rng::new(11);
+            let mut w = [0.0; 3];
+            for k in 0..2000 {
+                let t = k as f64 * 0.02;
+                let u = [0.5 + 0.1 * (t * 1.3).sin(), 0.5, 0.5];
+                let s = if k >= 200 { -0.4 * u[0] } else { 0.0 };
+                let mut r = [0.0; 4];
+                for i in 0..3 {
+                    w[i] = phi * w[i] + (1.0 - phi * phi).sqrt() * 0.05 * rng.normal();
+                    r[i] = b[0][i] * s + w[i];
+                }
+                test.push(t, &r, &u);
+            }
+            let r = test.evaluate().unwrap();
+            assert_eq!((r.actuator, r.kind), (0, ChangeKind::Gain), "{r:?}");
+            assert!((r.autocorrelation - phi).abs() < 0.05, "phi {phi}: {r:?}");
+        }
     }
 
     #[test]
