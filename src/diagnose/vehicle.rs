@@ -1276,21 +1276,24 @@ mod tests {
         assert!(out[4] > 0.15 && out[5].abs() < 0.5 * out[4], "{out:?}");
     }
 
-    #[test]
-    fn a_stuck_motor_the_filters_blame_on_its_opposite_is_named_and_classed_by_the_data() {
-        // Hexa X, motor 5 stuck at 0.62 from t = 8 s while its command moves about 0.5. The
-        // filters, which hold a motor's offset near zero, put it on opposite motor 6 as a
-        // loss (what they did on hexa-x-motor5-stuck); the healthy model's residuals carry
-        // motor 5's real effect. The decision names motor 5, stuck, and none names motor 6.
+    /// Hexa X, 12 s at 50 Hz, motor 5 stuck at 0.62 from t = 8 s while its command moves
+    /// about 0.5. The filters' estimates show `spread` (actuator, gamma ± 0.05) from then on,
+    /// what they make of a stuck motor; with `with_data` the diagnosis also gets the healthy
+    /// model's residuals, which carry motor 5's real effect (white noise at 0.3 of the level
+    /// the filters assume).
+    fn fly_hexa_motor5_stuck(
+        seed: u64,
+        with_data: bool,
+        spread: &[(usize, f64)],
+    ) -> (Diagnoser, Vec<Decision>) {
         let p = Profile::resolve("hexa-x").unwrap();
         let dt = 0.02;
         let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, dt);
         let effects = crate::estimate::vehicle::weighted_effects(&p, dt);
         let weights = crate::estimate::vehicle::residual_weights(&p, dt);
-        let mut rng = crate::sim::rng::Rng::new(3);
+        let mut rng = crate::sim::rng::Rng::new(seed);
         let healthy = healthy_estimate(0.02);
-        let mut decisions = vec![];
-        let mut out = vec![];
+        let (mut decisions, mut out) = (vec![], vec![]);
         for k in 0..600 {
             let t = k as f64 * dt;
             let mut u = [0.0; 6];
@@ -1298,23 +1301,37 @@ mod tests {
                 *x = 0.5 + 0.04 * (t * (2.0 + i as f64)).sin();
             }
             let stuck = t >= 8.0;
-            let change = if stuck { 0.62 - u[4] } else { 0.0 };
-            let mut residual = [0.0; 4];
-            for (i, r) in residual.iter_mut().enumerate() {
-                if weights[i] > 0.0 {
-                    *r = (effects[4][i] * change + 0.3 * rng.normal()) / weights[i];
+            if with_data {
+                let change = if stuck { 0.62 - u[4] } else { 0.0 };
+                let mut residual = [0.0; 4];
+                for (i, r) in residual.iter_mut().enumerate() {
+                    if weights[i] > 0.0 {
+                        *r = (effects[4][i] * change + 0.3 * rng.normal()) / weights[i];
+                    }
                 }
+                d.observe(t, &residual, &u);
             }
-            d.observe(t, &residual, &u);
             let mut est = [healthy; 6];
             if stuck {
-                est[5].gamma = 0.75;
-                est[5].gamma_lo = 0.7;
-                est[5].gamma_hi = 0.8;
+                for &(j, g) in spread {
+                    est[j].gamma = g;
+                    est[j].gamma_lo = g - 0.05;
+                    est[j].gamma_hi = g + 0.05;
+                }
             }
             d.update(t, &u, &[&est, &est], &mut out);
             decisions.append(&mut out);
         }
+        (d, decisions)
+    }
+
+    #[test]
+    fn a_stuck_motor_the_filters_blame_on_its_opposite_is_named_and_classed_by_the_data() {
+        // Hexa X, motor 5 stuck at 0.62 from t = 8 s while its command moves about 0.5. The
+        // filters, which hold a motor's offset near zero, put it on opposite motor 6 as a
+        // loss (what they did on hexa-x-motor5-stuck); the healthy model's residuals carry
+        // motor 5's real effect. The decision names motor 5, stuck, and none names motor 6.
+        let (d, decisions) = fly_hexa_motor5_stuck(3, true, &[(5, 0.75)]);
         let faults: Vec<_> = decisions
             .iter()
             .filter(|x| matches!(x.event, Event::Fault | Event::Changed))
@@ -1345,45 +1362,7 @@ mod tests {
         // As above, and the filters also spread the stuck motor over motor 2's gain (0.8).
         // Without the residuals (no change test) motor 2 gets a fault decision of its own;
         // with them, while the data pin motor 5 as stuck, it does not.
-        let p = Profile::resolve("hexa-x").unwrap();
-        let dt = 0.02;
-        let effects = crate::estimate::vehicle::weighted_effects(&p, dt);
-        let weights = crate::estimate::vehicle::residual_weights(&p, dt);
-        let healthy = healthy_estimate(0.02);
-        let run = |with_data: bool| -> Vec<Decision> {
-            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, dt);
-            let mut rng = crate::sim::rng::Rng::new(5);
-            let (mut decisions, mut out) = (vec![], vec![]);
-            for k in 0..600 {
-                let t = k as f64 * dt;
-                let mut u = [0.0; 6];
-                for (i, x) in u.iter_mut().enumerate() {
-                    *x = 0.5 + 0.04 * (t * (2.0 + i as f64)).sin();
-                }
-                let stuck = t >= 8.0;
-                let change = if stuck { 0.62 - u[4] } else { 0.0 };
-                if with_data {
-                    let mut residual = [0.0; 4];
-                    for (i, r) in residual.iter_mut().enumerate() {
-                        if weights[i] > 0.0 {
-                            *r = (effects[4][i] * change + 0.3 * rng.normal()) / weights[i];
-                        }
-                    }
-                    d.observe(t, &residual, &u);
-                }
-                let mut est = [healthy; 6];
-                if stuck {
-                    for (j, g) in [(5, 0.75), (1, 0.8)] {
-                        est[j].gamma = g;
-                        est[j].gamma_lo = g - 0.05;
-                        est[j].gamma_hi = g + 0.05;
-                    }
-                }
-                d.update(t, &u, &[&est, &est], &mut out);
-                decisions.append(&mut out);
-            }
-            decisions
-        };
+        let run = |with_data: bool| fly_hexa_motor5_stuck(5, with_data, &[(5, 0.75), (1, 0.8)]).1;
         let named = |ds: &[Decision], who: &str| {
             ds.iter()
                 .any(|x| x.event == Event::Fault && x.actuator.as_deref() == Some(who))
