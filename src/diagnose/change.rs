@@ -46,6 +46,9 @@ pub struct Reading {
     pub noise_var: f64,
     /// Lag-one autocorrelation of the residual the fit leaves in the changed stretch.
     pub autocorrelation: f64,
+    /// The actuator's mean command over the changed stretch (a stuck output's distance from
+    /// it is the size of that change).
+    pub command_mean: f64,
     /// The best drop of another kind of change of the same actuator.
     pub next_kind_drop: f64,
     /// The best drop of any change of another actuator.
@@ -170,14 +173,16 @@ impl ChangeTest {
         let cap = self.buf.len();
         let l = self.effects.len();
         // Per actuator and kind: (drop, samples, θ, residual variance).
-        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         for (j, b) in self.effects.iter().enumerate() {
             // Sums over the changed stretch, extended one sample back per iteration.
             let (mut base, mut gy, mut gx, mut oy, mut ox, mut bbu) =
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+            let mut su = 0.0;
             for n in 1..=self.len {
                 let e = &self.buf[(self.head + cap - n) % cap];
                 let u = e.u[j];
+                su += u;
                 for (&bi, &ri) in b.iter().zip(&e.r).take(self.rows) {
                     base += ri * ri;
                     gy += bi * u * ri;
@@ -192,7 +197,8 @@ impl ChangeTest {
                 let rows = (n * self.rows) as f64;
                 let mut consider = |k: usize, drop: f64, theta: f64| {
                     if drop.is_finite() && drop > best[j][k].0 {
-                        best[j][k] = (drop, n, theta, ((base - drop) / rows).max(0.0));
+                        let var = ((base - drop) / rows).max(0.0);
+                        best[j][k] = (drop, n, theta, var, su / n as f64);
                     }
                 };
                 if gx > 0.0 {
@@ -257,6 +263,7 @@ impl ChangeTest {
         };
         Some(Reading {
             autocorrelation,
+            command_mean: h.4,
             actuator: j,
             kind: kinds[k],
             value: h.2,
@@ -387,6 +394,7 @@ mod tests {
             drop: 120.0,
             noise_var: 1.0,
             autocorrelation: 0.0,
+            command_mean: 0.5,
             next_kind_drop: 100.0,
             next_actuator_drop: 0.0,
         };

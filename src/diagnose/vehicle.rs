@@ -22,8 +22,9 @@
 //! The filters' priors settle what the estimates cannot (a motor's change goes into its gain),
 //! so a data-level test (`change`: which one actuator's gain, offset or stuck output, since
 //! when, best explains the healthy model's residuals) names the actuator the attribution starts
-//! from and gives the class when it is clear; while it pins an offset or a stuck output on a
-//! motor, the other motors' alarms count as that motor's.
+//! from and gives the class when it is clear; a clear reading as large as the calibrated
+//! thresholds say a fault is adds to that actuator's detection statistic; while it pins an
+//! offset or a stuck output on a motor, the other motors' alarms count as that motor's.
 //!
 //! Angle outputs also have a gain statistic: how far the healthy gain lies outside the filter's
 //! gamma bounds, at a reference deflection (see `update`), attributed the same way.
@@ -338,6 +339,12 @@ const DATA_MARGIN: f64 = 20.0;
 /// The class also waits for this much of the changed stretch (s).
 const CLASS_MIN_S: f64 = 1.0;
 
+/// What a clear reading of the change test (actuator and class both beyond `DATA_MARGIN`, a
+/// change since a point inside the stored stretch, as large as the calibrated thresholds say a
+/// fault is) adds to that actuator's detection statistic: twice the threshold, so it alarms
+/// 0.25 s later if the filters' own statistics have not.
+const DATA_CONFIRMED_RATIO: f64 = 2.0;
+
 /// Seconds of `u_quiet` std snapshots kept (see `ActuatorState::quiet_sd`).
 const QUIET_SNAPSHOTS: usize = 4;
 
@@ -459,6 +466,20 @@ impl Diagnoser {
                     && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
             })
             .map(|r| r.actuator)
+    }
+
+    /// Whether a reading's change is as large as the calibrated thresholds say a fault is: a
+    /// gain by the gain statistic's measure (`(1 - γ) gain_ref` against `gain_threshold`;
+    /// none without one, as for motors), an offset or a stuck output's distance from the
+    /// mean command against `threshold`. The change test's margins alone let gusts through
+    /// (a healthy plane's elevator read as a gain of 0.69 "clearly").
+    fn beyond_thresholds(&self, r: &Reading) -> bool {
+        let p = &self.params;
+        match r.kind {
+            ChangeKind::Gain => (1.0 - r.value).abs() * p.gain_ref >= p.gain_threshold,
+            ChangeKind::Offset => r.value.abs() >= p.threshold,
+            ChangeKind::Stuck => (r.value - r.command_mean).abs() >= p.threshold,
+        }
     }
 
     /// What the change test reads for actuator `j`, for a decision's detail.
@@ -799,6 +820,19 @@ impl Diagnoser {
                 }
             }
         }
+        // An actuator the data name and class clearly, with a change beyond the tolerances,
+        // counts as twice over the threshold in both filters' CUSUMs (see `DATA_CONFIRMED_RATIO`).
+        // (A change: the stored stretch also holds a second of what came before it. A reading
+        // over the whole store may be the model's standing mismatch.)
+        let before = (1.0 / self.dt).round() as usize;
+        let confirmed = self.reading.map(|r| r.actuator).filter(|&j| {
+            self.data_class(j).is_some()
+                && self.reading.is_some_and(|r| {
+                    r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
+                        && r.samples + before <= self.change.len()
+                        && self.beyond_thresholds(&r)
+                })
+        });
         for j in 0..l {
             let st = &mut self.actuators[j];
             for f in 0..2 {
@@ -808,8 +842,11 @@ impl Diagnoser {
                 ch.e = explained[0][f][j];
                 ch.excursion = explained[1][f][j];
                 ch.gain_gap = explained[2][f][j];
-                let ratio = (explained[0][f][j].hypot(explained[1][f][j]) / p.threshold)
+                let mut ratio = (explained[0][f][j].hypot(explained[1][f][j]) / p.threshold)
                     .max(explained[2][f][j].abs() / p.gain_threshold);
+                if confirmed == Some(j) {
+                    ratio = ratio.max(DATA_CONFIRMED_RATIO);
+                }
                 ch.ratio = ratio;
                 ch.cusum = (ch.cusum + (ratio - 1.0) * self.dt).max(0.0);
                 if !warm || t < ch.hold_until {
@@ -1383,6 +1420,72 @@ mod tests {
             "{with:?}"
         );
         assert!(!with.iter().any(|x| x.event == Event::Cleared), "{with:?}");
+    }
+
+    #[test]
+    fn a_clear_reading_as_large_as_a_fault_detects_what_the_estimates_miss() {
+        // Plane, elevator commanded about 0.1 ± 0.08; from t = 8 s its gain is `gamma`. The
+        // filters' estimates show it only weakly: their gain statistic just over its threshold
+        // (bounds up to 0.61 against the 0.62 the calibrated gain threshold implies, 1 - 0.095
+        // / 0.25), which alone alarms after about 10 s. The residuals carry the change. A gain
+        // of 0.45 is beyond what that threshold calls a fault: decided within 2 s, as a loss;
+        // without the residuals, not within the 4 s flown after the change; 0.75 is a clear
+        // change too but smaller than that: no decision either.
+        let p = Profile::resolve("plane").unwrap();
+        let dt = 0.02;
+        let effects = crate::estimate::vehicle::weighted_effects(&p, dt);
+        let weights = crate::estimate::vehicle::residual_weights(&p, dt);
+        let healthy = healthy_estimate(0.02);
+        let weak = AhcEstimate {
+            gamma: 0.58,
+            gamma_lo: 0.55,
+            gamma_hi: 0.61,
+            ..healthy
+        };
+        let fly = |gamma: f64, with_data: bool| -> Vec<Decision> {
+            let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, dt);
+            let mut rng = crate::sim::rng::Rng::new(9);
+            let (mut decisions, mut out) = (vec![], vec![]);
+            for k in 0..600 {
+                let t = k as f64 * dt;
+                let u = [
+                    0.02 * (t * 2.0).sin(),
+                    0.1 + 0.08 * (t * 3.1).sin(),
+                    0.02 * (t * 1.7).sin(),
+                ];
+                let change = if t >= 8.0 { (gamma - 1.0) * u[1] } else { 0.0 };
+                let mut residual = [0.0; 4];
+                for (i, r) in residual.iter_mut().enumerate().take(3) {
+                    *r = (effects[1][i] * change + 0.3 * rng.normal()) / weights[i];
+                }
+                if with_data {
+                    d.observe(t, &residual, &u);
+                }
+                let mut est = [healthy; 3];
+                if t >= 8.0 {
+                    est[1] = weak;
+                }
+                d.update(t, &u, &[&est, &est], &mut out);
+                decisions.append(&mut out);
+            }
+            decisions
+        };
+        let large = fly(0.45, true);
+        let fault = large
+            .iter()
+            .find(|x| x.event == Event::Fault)
+            .unwrap_or_else(|| panic!("{large:?}"));
+        assert_eq!(fault.actuator.as_deref(), Some("elevator"), "{large:?}");
+        assert_eq!(
+            fault.class,
+            Some(FaultClass::LossOfEffectiveness),
+            "{large:?}"
+        );
+        assert!(fault.t > 8.0 && fault.t < 10.0, "{fault:?}");
+        for (gamma, with_data) in [(0.45, false), (0.75, true)] {
+            let none = fly(gamma, with_data);
+            assert!(!none.iter().any(|x| x.event == Event::Fault), "{none:?}");
+        }
     }
 
     #[test]
