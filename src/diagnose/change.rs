@@ -51,6 +51,9 @@ pub struct Reading {
     pub command_mean: f64,
     /// The best drop of another kind of change of the same actuator.
     pub next_kind_drop: f64,
+    /// The best drop of a gain and an offset of the same actuator changing together (two
+    /// unknowns): well above `drop`, the change is not of one kind.
+    pub mixed_drop: f64,
     /// The best drop of any change of another actuator.
     pub next_actuator_drop: f64,
 }
@@ -174,6 +177,7 @@ impl ChangeTest {
         let l = self.effects.len();
         // Per actuator and kind: (drop, samples, θ, residual variance).
         let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        let mut mixed = [0.0f64; MAX_ACTUATORS];
         for (j, b) in self.effects.iter().enumerate() {
             // Sums over the changed stretch, extended one sample back per iteration.
             let (mut base, mut gy, mut gx, mut oy, mut ox, mut bbu) =
@@ -201,6 +205,15 @@ impl ChangeTest {
                         best[j][k] = (drop, n, theta, var, su / n as f64);
                     }
                 };
+                // Gain and offset together: the 2×2 normal equations.
+                let det = gx * ox - bbu * bbu;
+                if det > 1e-9 * gx * ox {
+                    let (a, d) = ((gy * ox - bbu * oy) / det, (gx * oy - bbu * gy) / det);
+                    let drop = a * gy + d * oy;
+                    if drop.is_finite() && drop > mixed[j] {
+                        mixed[j] = drop;
+                    }
+                }
                 if gx > 0.0 {
                     consider(0, gy * gy / gx, 1.0 + gy / gx);
                 }
@@ -273,6 +286,7 @@ impl ChangeTest {
             noise_var: h.3,
             next_kind_drop,
             next_actuator_drop,
+            mixed_drop: mixed[j],
         })
     }
 }
@@ -397,6 +411,7 @@ mod tests {
             command_mean: 0.5,
             next_kind_drop: 100.0,
             next_actuator_drop: 0.0,
+            mixed_drop: 0.0,
         };
         assert!((r.margin_over(r.next_kind_drop) - 20.0).abs() < 1e-9);
         let coloured = Reading {
@@ -436,6 +451,43 @@ mod tests {
             assert_eq!((r.actuator, r.kind), (0, ChangeKind::Gain), "{r:?}");
             assert!((r.autocorrelation - phi).abs() < 0.05, "phi {phi}: {r:?}");
         }
+    }
+
+    #[test]
+    fn a_gain_and_an_offset_together_fit_as_mixed_and_one_kind_alone_does_not() {
+        // A servo whose PWM is scaled about 1000 µs: about its trim, gain 0.75 and offset
+        // -0.25 at once. The two-unknown fit leaves only the noise; the best single kind
+        // leaves far more. A pure gain change gains nothing from the second unknown.
+        let b = effects();
+        let fit = |mixed: bool| {
+            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10);
+            let mut rng = Rng::new(4);
+            for k in 0..400 {
+                let t = k as f64 * 0.02;
+                let u = [0.3 * (t * 1.9).sin(), 0.0, 0.0];
+                let s = if k >= 100 {
+                    -0.25 * u[0] - if mixed { 0.25 } else { 0.0 }
+                } else {
+                    0.0
+                };
+                let mut r = [0.0; 4];
+                for i in 0..3 {
+                    r[i] = b[0][i] * s + 0.05 * rng.normal();
+                }
+                test.push(t, &r, &u);
+            }
+            test.evaluate().unwrap()
+        };
+        let both = fit(true);
+        assert_eq!(both.actuator, 0);
+        assert!(-both.margin_over(both.mixed_drop) > 100.0, "{both:?}");
+        let gain = fit(false);
+        assert_eq!(
+            (gain.actuator, gain.kind),
+            (0, ChangeKind::Gain),
+            "{gain:?}"
+        );
+        assert!(-gain.margin_over(gain.mixed_drop) < 20.0, "{gain:?}");
     }
 
     #[test]

@@ -441,6 +441,11 @@ impl Diagnoser {
         if !long || r.margin_over(r.next_kind_drop) < DATA_MARGIN {
             return None;
         }
+        // A gain and an offset together fitting clearly better is no single kind (the SITL
+        // servo faults scale the PWM about 1000 µs: about the 1500 µs trim, both).
+        if -r.margin_over(r.mixed_drop) >= DATA_MARGIN {
+            return None;
+        }
         let p = &self.params;
         match r.kind {
             ChangeKind::Gain if r.value < 1.0 - p.loe_tau => Some(FaultClass::LossOfEffectiveness),
