@@ -258,16 +258,21 @@ impl ChangeTest {
             };
             e.r[i] - b[i] * s
         };
+        // Walking back from the newest sample, each one's fit residual pairs with the one
+        // after it (kept from the previous iteration).
         let (mut lag, mut sq) = (0.0, 0.0);
+        let mut newer: Option<[f64; 4]> = None;
         for n in 1..=h.1 {
             let e = &self.buf[(self.head + cap - n) % cap];
-            for i in 0..self.rows {
-                let x = fitted(e, i);
-                sq += x * x;
-                if n < h.1 {
-                    lag += x * fitted(&self.buf[(self.head + cap - n - 1) % cap], i);
+            let mut x = [0.0; 4];
+            for (i, xi) in x.iter_mut().enumerate().take(self.rows) {
+                *xi = fitted(e, i);
+                sq += *xi * *xi;
+                if let Some(next) = newer {
+                    lag += *xi * next[i];
                 }
             }
+            newer = Some(x);
         }
         let autocorrelation = if sq > 0.0 {
             (lag / sq).clamp(-1.0, 1.0)
