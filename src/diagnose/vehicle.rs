@@ -1172,7 +1172,10 @@ impl Diagnoser {
         filters: u8,
     ) -> Decision {
         let st = &self.actuators[j];
-        let e = st.channels[0].last;
+        // The numbers are the deciding filter's: the MIT-UKF's when it is among them, the
+        // MIT-ESMF's set when it decides alone (its bounds, not the other filter's).
+        let source = if filters == 0b10 { 1 } else { 0 };
+        let e = st.channels[source].last;
         // Both filters raise it: higher when they did so within `agree_s` of each other.
         // (Only when both of its own channels alarm: alarms taken over from other motors, or
         // an old alarm since cleared, say nothing about the two filters agreeing in time.)
@@ -1560,6 +1563,40 @@ mod tests {
             delta_hi: delta_half,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_decision_by_the_set_filter_alone_carries_its_numbers() {
+        // Quad X, motor 2 at gamma 0.6 in the MIT-ESMF's set only; the MIT-UKF reads healthy.
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let healthy = healthy_estimate(0.02);
+        let mut set = [healthy; 4];
+        set[1].gamma = 0.6;
+        set[1].gamma_lo = 0.52;
+        set[1].gamma_hi = 0.68;
+        set[1].delta = 0.01;
+        set[1].delta_lo = -0.03;
+        set[1].delta_hi = 0.05;
+        let mut out = vec![];
+        let mut faults = vec![];
+        for k in 0..600 {
+            let t = k as f64 * 0.02;
+            d.update(
+                t,
+                &[0.5 + 0.2 * (t * 4.0).sin(); 4],
+                &[&[healthy; 4], &set],
+                &mut out,
+            );
+            faults.extend(out.drain(..).filter(|x| x.event == Event::Fault));
+        }
+        let first = faults.first().expect("the set filter decides");
+        assert_eq!(first.actuator.as_deref(), Some("motor2"));
+        assert_eq!(first.filters, vec!["mit-esmf"]);
+        assert_eq!(first.gamma, Some(0.6));
+        assert_eq!(first.gamma_bounds, Some([0.52, 0.68]));
+        assert_eq!(first.delta, Some(0.01));
+        assert_eq!(first.delta_bounds, Some([-0.03, 0.05]));
     }
 
     #[test]
