@@ -17,17 +17,19 @@ fn run(name: &str, seed: u64) -> ahcmon::eval::Run {
 /// The fault scenarios that work today, by both filters and on three seeds: the right actuator
 /// within 2 s, the class right, no decision on any other actuator. The truth comes from the
 /// simulator, not from the filter; the thresholds come from healthy flights (`ahcmon
-/// thresholds`), not from these.
+/// thresholds`), not from these. Hexa motor 3 also on seed 4, where the filters spread the
+/// loss onto motor 1 13 s after the onset (decided as a fault of its own until the data's
+/// pin on a decided motor's gain held the other motors' alarms).
 #[test]
 fn faults_are_isolated_by_both_filters_and_classified() {
-    for (name, class) in [
-        ("quad-x-motor2-loe", "loss_of_effectiveness"),
-        ("heli-swash2-loe", "loss_of_effectiveness"),
-        ("hexa-x-motor3-loe", "loss_of_effectiveness"),
-        ("heli-tail-bias", "bias"),
-        ("plane-aileron-bias", "bias"),
+    for (name, class, seeds) in [
+        ("quad-x-motor2-loe", "loss_of_effectiveness", 3),
+        ("heli-swash2-loe", "loss_of_effectiveness", 3),
+        ("hexa-x-motor3-loe", "loss_of_effectiveness", 4),
+        ("heli-tail-bias", "bias", 3),
+        ("plane-aileron-bias", "bias", 3),
     ] {
-        for seed in 1..=3 {
+        for seed in 1..=seeds {
             let r = run(name, seed);
             for f in &r.filters {
                 let m = &f.metrics;

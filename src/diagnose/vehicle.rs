@@ -473,6 +473,21 @@ impl Diagnoser {
             .map(|r| r.actuator)
     }
 
+    /// A decided motor whose gain change the data still pin on it, clearly against every
+    /// other actuator: the filters spread such a loss over the other motors' gains too.
+    /// Not kept beyond the reading (a gain is something the filters represent, and a second
+    /// motor's fault must not stay hidden behind the first).
+    fn pinned_decided_gain(&self) -> Option<usize> {
+        self.reading
+            .filter(|r| {
+                self.is_motor[r.actuator]
+                    && r.kind == ChangeKind::Gain
+                    && self.actuators[r.actuator].active.is_some()
+                    && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
+            })
+            .map(|r| r.actuator)
+    }
+
     /// Whether a reading's change is as large as the calibrated thresholds say a fault is: a
     /// gain by the gain statistic's measure (`(1 - γ) gain_ref` against `gain_threshold`;
     /// none without one, as for motors), an offset or a stuck output's distance from the
@@ -885,7 +900,9 @@ impl Diagnoser {
         // is made). A motor's offset or stuck output, which the filters hold near zero by
         // design (motors fail low), spreads over the other motors' gains: while the data pin
         // it on its motor, the alarms of other motors without a fault in force count as that
-        // motor's (and are listed with it, `also`), not as faults of their own.
+        // motor's (and are listed with it, `also`), not as faults of their own. So do they
+        // under a decided motor's gain loss, but only while the data pin it (gusts made the
+        // filters spread hexa motor 3's loss onto motor 1 13 s after the onset).
         let mut alarms = [0u8; crate::model::MAX_ACTUATORS];
         for (bits, st) in alarms.iter_mut().zip(&self.actuators) {
             *bits = (0..2)
@@ -898,7 +915,8 @@ impl Diagnoser {
             _ => None,
         };
         let mut borrowed_now = 0u16;
-        if let Some(m) = self.pinned {
+        let holder = self.pinned.or_else(|| self.pinned_decided_gain());
+        if let Some(m) = holder {
             for j in (0..l).filter(|&j| j != m && self.is_motor[j]) {
                 if self.actuators[j].active.is_none() && alarms[j] != 0 {
                     alarms[m] |= alarms[j];
@@ -981,7 +999,7 @@ impl Diagnoser {
                         append_detail(&mut d, note);
                     }
                     out.push(d);
-                    let pinned = self.pinned == Some(j);
+                    let pinned = holder == Some(j);
                     let st = &mut self.actuators[j];
                     st.active = Some(c);
                     st.active_filters = filters;
@@ -1015,8 +1033,8 @@ impl Diagnoser {
                     }
                     let st = &self.actuators[j];
                     let union = st.active_filters | filters;
-                    let newly_borrowed = self.pinned == Some(j) && borrowed_now & !st.borrowed != 0;
-                    if self.pinned == Some(j) {
+                    let newly_borrowed = holder == Some(j) && borrowed_now & !st.borrowed != 0;
+                    if holder == Some(j) {
                         self.actuators[j].borrowed |= borrowed_now;
                     }
                     let st = &self.actuators[j];
