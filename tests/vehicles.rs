@@ -300,6 +300,44 @@ fn a_stuck_high_hexa_motor_is_at_least_named() {
     }
 }
 
+/// Hexa motor 3 LOE, seed 4: 13 s after the onset the filters spread the loss onto motor 1.
+/// While the data pin the decided loss on motor 3, motor 1's alarm is listed with it (`also`,
+/// in a `changed` decision), not decided as a fault of its own.
+#[test]
+fn a_decided_motor_loss_the_data_pin_holds_the_alarm_it_spreads() {
+    use ahcmon::diagnose::vehicle::{Decision, Event};
+    use ahcmon::estimate::vehicle::AhcEstimate;
+    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
+    use ahcmon::sim::vehicle::VehicleSample;
+    struct All(Vec<Decision>);
+    impl StepSink for All {
+        fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
+        fn decision(&mut self, d: &Decision) {
+            self.0.push(d.clone());
+        }
+    }
+    let named = resolve("hexa-x-motor3-loe").unwrap();
+    let mut all = All(vec![]);
+    run_vehicle_scenario(&named, 4, false, &mut all).unwrap();
+    let faults: Vec<&Decision> = all
+        .0
+        .iter()
+        .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
+        .collect();
+    assert!(
+        faults
+            .iter()
+            .all(|d| d.actuator.as_deref() == Some("motor3")),
+        "{faults:?}"
+    );
+    assert!(
+        faults
+            .iter()
+            .any(|d| d.t > 25.0 && d.also.iter().any(|a| a == "motor1")),
+        "{faults:?}"
+    );
+}
+
 /// A lossy link during the calibration stretch (one sample in 10 lost, as on a radio at range):
 /// the steps across each hole are left out of the fit (`follows_previous: false` on the sample
 /// after it), so the fit is as good as on the full stretch. Joined as if consecutive, every

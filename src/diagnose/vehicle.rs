@@ -24,7 +24,8 @@
 //! when, best explains the healthy model's residuals) names the actuator the attribution starts
 //! from and gives the class when it is clear; a clear reading as large as the calibrated
 //! thresholds say a fault is adds to that actuator's detection statistic; while it pins an
-//! offset or a stuck output on a motor, the other motors' alarms count as that motor's.
+//! offset or a stuck output on a motor, or a loss on a motor already decided, the other
+//! motors' alarms count as that motor's.
 //!
 //! Angle outputs also have a gain statistic: how far the healthy gain lies outside the filter's
 //! gamma bounds, at a reference deflection (see `update`), attributed the same way.
@@ -271,7 +272,8 @@ struct ActuatorState {
     /// of class is reported only once it has held for `CLASS_HOLD_S`.
     class_candidate: Option<(FaultClass, f64)>,
     /// Other motors whose alarms this one's fault in force has taken over (bit k = actuator
-    /// k; see `update`): a newly taken one is reported (`changed`, in `also`).
+    /// k; see `update`), kept while their alarms last: a newly taken one is reported
+    /// (`changed`, in `also`).
     borrowed: u16,
 }
 
@@ -482,6 +484,7 @@ impl Diagnoser {
             .filter(|r| {
                 self.is_motor[r.actuator]
                     && r.kind == ChangeKind::Gain
+                    && r.value < 1.0 - self.params.loe_tau
                     && self.actuators[r.actuator].active.is_some()
                     && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
             })
@@ -900,9 +903,10 @@ impl Diagnoser {
         // is made). A motor's offset or stuck output, which the filters hold near zero by
         // design (motors fail low), spreads over the other motors' gains: while the data pin
         // it on its motor, the alarms of other motors without a fault in force count as that
-        // motor's (and are listed with it, `also`), not as faults of their own. So do they
-        // under a decided motor's gain loss, but only while the data pin it (gusts made the
-        // filters spread hexa motor 3's loss onto motor 1 13 s after the onset).
+        // motor's (and are listed with it, `also`), not as faults of their own. A decided
+        // motor's gain loss takes over the alarms that start while the data pin it (gusts made
+        // the filters spread hexa motor 3's loss onto motor 1 13 s after the onset), and keeps
+        // each while it lasts; a motor alarming while no pin holds is decided on its own.
         let mut alarms = [0u8; crate::model::MAX_ACTUATORS];
         for (bits, st) in alarms.iter_mut().zip(&self.actuators) {
             *bits = (0..2)
@@ -914,12 +918,40 @@ impl Diagnoser {
             (None, Some(m)) if self.actuators[m].active.is_some() => Some(m),
             _ => None,
         };
-        let mut borrowed_now = 0u16;
         let holder = self.pinned.or_else(|| self.pinned_decided_gain());
+        // Motors a fault in force took over stay with it while their alarms last (a reading
+        // that dips for a step must not hand them back as faults of their own); once an
+        // alarm ends, a later one is taken over afresh (and said) or decided on its own.
+        let raw = alarms;
+        let mut alarming = 0u16;
+        for (j, bits) in raw.iter().enumerate().take(l) {
+            if *bits != 0 {
+                alarming |= 1 << j;
+            }
+        }
+        for k in 0..l {
+            let st = &mut self.actuators[k];
+            if st.active.is_none() {
+                continue;
+            }
+            st.borrowed &= alarming;
+            let kept = st.borrowed;
+            for j in (0..l).filter(|&j| kept & (1 << j) != 0 && Some(j) != holder) {
+                if self.actuators[j].active.is_none() {
+                    alarms[j] = 0;
+                }
+            }
+        }
+        let mut borrowed_now = 0u16;
         if let Some(m) = holder {
             for j in (0..l).filter(|&j| j != m && self.is_motor[j]) {
-                if self.actuators[j].active.is_none() && alarms[j] != 0 {
-                    alarms[m] |= alarms[j];
+                if self.actuators[j].active.is_none() && raw[j] != 0 {
+                    // A pinned offset or stuck output may have no alarm of its own: the
+                    // filters show it only on the motors they spread it over, so their alarms
+                    // are its evidence. A decided gain loss has its own; it only holds theirs.
+                    if self.pinned == Some(m) {
+                        alarms[m] |= raw[j];
+                    }
                     alarms[j] = 0;
                     borrowed_now |= 1 << j;
                 }
@@ -971,8 +1003,10 @@ impl Diagnoser {
             }
             // Classification needs the command to have moved enough to separate gamma and delta.
             let excited = !low;
+            // The numbers a class is read from: those of the filters deciding.
+            let src = numbers_from(self.actuators[j].active_filters | filters);
             let class = if excited || self.data_class(j).is_some() {
-                self.classify(j)
+                self.classify(j, src)
             } else {
                 FaultClass::Unclassified
             };
@@ -984,13 +1018,13 @@ impl Diagnoser {
                     if c == FaultClass::Unclassified {
                         d.detail = Some(format!(
                             "effective output off by {:+.3} (gamma*u+delta at the operating point); the command has not varied enough (std {:.4}) to tell gain from bias",
-                            self.actuators[j].channels[0].e,
+                            self.actuators[j].channels[src].e,
                             self.actuators[j].u.var.sqrt()
                         ));
                     }
                     for note in [
                         self.alternative(j),
-                        self.read_by_prior(j, c, t),
+                        self.read_by_prior(j, c, t, src),
                         self.data_note(j),
                     ]
                     .into_iter()
@@ -1010,7 +1044,7 @@ impl Diagnoser {
                     // A class once found stays until the excitation allows another, and a new
                     // one must hold for a while. The class is read from the MIT-UKF: while it
                     // warms up after a reset, its estimates say nothing about the class.
-                    let ukf_warming = t < self.actuators[j].channels[0].hold_until;
+                    let ukf_warming = t < self.actuators[j].channels[src].hold_until;
                     let mut c = if c == FaultClass::Unclassified || ukf_warming {
                         prev
                     } else {
@@ -1041,7 +1075,7 @@ impl Diagnoser {
                     if c != prev || union != st.active_filters || newly_borrowed {
                         let mut d = self.decision(t, j, Event::Changed, Some(c), union);
                         d.also = self.also(j);
-                        for note in [self.read_by_prior(j, c, t), self.data_note(j)]
+                        for note in [self.read_by_prior(j, c, t, src), self.data_note(j)]
                             .into_iter()
                             .flatten()
                         {
@@ -1075,7 +1109,7 @@ impl Diagnoser {
     /// A motor or throttle whose command barely moves about its operating point: its gain and
     /// offset changes look alike there, so the class came from the filters' prior (motors
     /// lose gain), not from the data. Says so, with the reading the data could not rule out.
-    fn read_by_prior(&self, j: usize, class: FaultClass, t: f64) -> Option<String> {
+    fn read_by_prior(&self, j: usize, class: FaultClass, t: f64, src: usize) -> Option<String> {
         if self.data_class(j) == Some(class) {
             return None;
         }
@@ -1101,7 +1135,7 @@ impl Diagnoser {
         if self.is_angle[j] || mean.abs() < 1e-3 || sd >= SEPARABLE_REL_STD * mean.abs() {
             return None;
         }
-        let e = st.channels[0].last;
+        let e = st.channels[src].last;
         // The change of the effective output at the operating point, read the other way.
         let effect = (e.gamma - 1.0) * mean + e.delta;
         let other = match class {
@@ -1148,10 +1182,10 @@ impl Diagnoser {
         se > 0.0 && slope.abs() / se > 30.0 && span > self.params.bias_tau
     }
 
-    fn classify(&self, j: usize) -> FaultClass {
+    fn classify(&self, j: usize, src: usize) -> FaultClass {
         let p = &self.params;
         let st = &self.actuators[j];
-        let e = st.channels[0].last;
+        let e = st.channels[src].last;
         // A steadily moving offset is a drift whatever fits best over the stretch (under a
         // controller that follows it, a ramp fits a stuck output too); then the data's kind,
         // then the MIT-UKF's estimates.
@@ -1174,7 +1208,7 @@ impl Diagnoser {
             return FaultClass::Bias;
         }
         // Mixed: say what the output lost at the operating point.
-        if st.channels[0].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
+        if st.channels[src].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
             FaultClass::LossOfEffectiveness
         } else {
             FaultClass::Bias
@@ -1191,9 +1225,14 @@ impl Diagnoser {
     ) -> Decision {
         let st = &self.actuators[j];
         // The numbers are the deciding filter's: the MIT-UKF's when it is among them, the
-        // MIT-ESMF's set when it decides alone (its bounds, not the other filter's).
-        let source = if filters == 0b10 { 1 } else { 0 };
-        let e = st.channels[source].last;
+        // MIT-ESMF's set when it decides alone (its bounds, not the other filter's). Events
+        // without filters (a clearing) carry those of the fault in force.
+        let e = st.channels[numbers_from(if filters == 0 {
+            st.active_filters
+        } else {
+            filters
+        })]
+        .last;
         // Both filters raise it: higher when they did so within `agree_s` of each other.
         // (Only when both of its own channels alarm: alarms taken over from other motors, or
         // an old alarm since cleared, say nothing about the two filters agreeing in time.)
@@ -1227,6 +1266,12 @@ impl Diagnoser {
             detail: None,
         }
     }
+}
+
+/// The channel whose numbers a decision by the filters in `mask` carries: the MIT-UKF's when
+/// it is among them (or none is), the MIT-ESMF's when it decides alone.
+fn numbers_from(mask: u8) -> usize {
+    if mask == 0b10 { 1 } else { 0 }
 }
 
 /// Solve the `k`×`k` system in `a` (augmented with the right-hand side in column `k`) by
@@ -1585,10 +1630,16 @@ mod tests {
 
     #[test]
     fn a_decision_by_the_set_filter_alone_carries_its_numbers() {
-        // Quad X, motor 2 at gamma 0.6 in the MIT-ESMF's set only; the MIT-UKF reads healthy.
+        // Quad X, motor 2 at gamma 0.6 in the MIT-ESMF's set only for 12 s; the MIT-UKF reads
+        // healthy throughout (gamma 1.01, bounds containing 1). The decision, its class and
+        // its clearing (after the set reads healthy again) carry the set filter's numbers.
         let p = Profile::resolve("quad-x").unwrap();
         let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
         let healthy = healthy_estimate(0.02);
+        let ukf = [AhcEstimate {
+            gamma: 1.01,
+            ..healthy
+        }; 4];
         let mut set = [healthy; 4];
         set[1].gamma = 0.6;
         set[1].gamma_lo = 0.52;
@@ -1597,24 +1648,30 @@ mod tests {
         set[1].delta_lo = -0.03;
         set[1].delta_hi = 0.05;
         let mut out = vec![];
-        let mut faults = vec![];
-        for k in 0..600 {
+        let mut decided = vec![];
+        for k in 0..1000 {
             let t = k as f64 * 0.02;
-            d.update(
-                t,
-                &[0.5 + 0.2 * (t * 4.0).sin(); 4],
-                &[&[healthy; 4], &set],
-                &mut out,
-            );
-            faults.extend(out.drain(..).filter(|x| x.event == Event::Fault));
+            let now = if t < 12.0 { &set } else { &[healthy; 4] };
+            d.update(t, &[0.5 + 0.2 * (t * 4.0).sin(); 4], &[&ukf, now], &mut out);
+            decided.append(&mut out);
         }
-        let first = faults.first().expect("the set filter decides");
+        let first = decided
+            .iter()
+            .find(|x| x.event == Event::Fault)
+            .expect("the set filter decides");
         assert_eq!(first.actuator.as_deref(), Some("motor2"));
         assert_eq!(first.filters, vec!["mit-esmf"]);
+        assert_eq!(first.class, Some(FaultClass::LossOfEffectiveness));
         assert_eq!(first.gamma, Some(0.6));
         assert_eq!(first.gamma_bounds, Some([0.52, 0.68]));
         assert_eq!(first.delta, Some(0.01));
         assert_eq!(first.delta_bounds, Some([-0.03, 0.05]));
+        let cleared = decided
+            .iter()
+            .find(|x| x.event == Event::Cleared)
+            .expect("cleared once the set reads healthy");
+        assert_eq!(cleared.actuator.as_deref(), Some("motor2"));
+        assert_eq!(cleared.gamma, Some(1.0), "{cleared:?}");
     }
 
     #[test]
