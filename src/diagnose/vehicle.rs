@@ -1003,10 +1003,8 @@ impl Diagnoser {
             }
             // Classification needs the command to have moved enough to separate gamma and delta.
             let excited = !low;
-            // The numbers a class is read from: those of the filters deciding.
-            let src = numbers_from(self.actuators[j].active_filters | filters);
             let class = if excited || self.data_class(j).is_some() {
-                self.classify(j, src)
+                self.classify(j)
             } else {
                 FaultClass::Unclassified
             };
@@ -1018,13 +1016,13 @@ impl Diagnoser {
                     if c == FaultClass::Unclassified {
                         d.detail = Some(format!(
                             "effective output off by {:+.3} (gamma*u+delta at the operating point); the command has not varied enough (std {:.4}) to tell gain from bias",
-                            self.actuators[j].channels[src].e,
+                            self.actuators[j].channels[0].e,
                             self.actuators[j].u.var.sqrt()
                         ));
                     }
                     for note in [
                         self.alternative(j),
-                        self.read_by_prior(j, c, t, src),
+                        self.read_by_prior(j, c, t),
                         self.data_note(j),
                     ]
                     .into_iter()
@@ -1044,7 +1042,7 @@ impl Diagnoser {
                     // A class once found stays until the excitation allows another, and a new
                     // one must hold for a while. The class is read from the MIT-UKF: while it
                     // warms up after a reset, its estimates say nothing about the class.
-                    let ukf_warming = t < self.actuators[j].channels[src].hold_until;
+                    let ukf_warming = t < self.actuators[j].channels[0].hold_until;
                     let mut c = if c == FaultClass::Unclassified || ukf_warming {
                         prev
                     } else {
@@ -1075,7 +1073,7 @@ impl Diagnoser {
                     if c != prev || union != st.active_filters || newly_borrowed {
                         let mut d = self.decision(t, j, Event::Changed, Some(c), union);
                         d.also = self.also(j);
-                        for note in [self.read_by_prior(j, c, t, src), self.data_note(j)]
+                        for note in [self.read_by_prior(j, c, t), self.data_note(j)]
                             .into_iter()
                             .flatten()
                         {
@@ -1109,7 +1107,7 @@ impl Diagnoser {
     /// A motor or throttle whose command barely moves about its operating point: its gain and
     /// offset changes look alike there, so the class came from the filters' prior (motors
     /// lose gain), not from the data. Says so, with the reading the data could not rule out.
-    fn read_by_prior(&self, j: usize, class: FaultClass, t: f64, src: usize) -> Option<String> {
+    fn read_by_prior(&self, j: usize, class: FaultClass, t: f64) -> Option<String> {
         if self.data_class(j) == Some(class) {
             return None;
         }
@@ -1135,7 +1133,7 @@ impl Diagnoser {
         if self.is_angle[j] || mean.abs() < 1e-3 || sd >= SEPARABLE_REL_STD * mean.abs() {
             return None;
         }
-        let e = st.channels[src].last;
+        let e = st.channels[0].last;
         // The change of the effective output at the operating point, read the other way.
         let effect = (e.gamma - 1.0) * mean + e.delta;
         let other = match class {
@@ -1182,10 +1180,10 @@ impl Diagnoser {
         se > 0.0 && slope.abs() / se > 30.0 && span > self.params.bias_tau
     }
 
-    fn classify(&self, j: usize, src: usize) -> FaultClass {
+    fn classify(&self, j: usize) -> FaultClass {
         let p = &self.params;
         let st = &self.actuators[j];
-        let e = st.channels[src].last;
+        let e = st.channels[0].last;
         // A steadily moving offset is a drift whatever fits best over the stretch (under a
         // controller that follows it, a ramp fits a stuck output too); then the data's kind,
         // then the MIT-UKF's estimates.
@@ -1208,7 +1206,7 @@ impl Diagnoser {
             return FaultClass::Bias;
         }
         // Mixed: say what the output lost at the operating point.
-        if st.channels[src].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
+        if st.channels[0].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
             FaultClass::LossOfEffectiveness
         } else {
             FaultClass::Bias
@@ -1224,15 +1222,11 @@ impl Diagnoser {
         filters: u8,
     ) -> Decision {
         let st = &self.actuators[j];
-        // The numbers are the deciding filter's: the MIT-UKF's when it is among them, the
-        // MIT-ESMF's set when it decides alone (its bounds, not the other filter's). Events
-        // without filters (a clearing) carry those of the fault in force.
-        let e = st.channels[numbers_from(if filters == 0 {
-            st.active_filters
-        } else {
-            filters
-        })]
-        .last;
+        // The numbers are the MIT-UKF's, whichever filters alarmed (`filters`): the point
+        // estimate with its bounds. The MIT-ESMF's set on a vehicle mostly sits at its a priori
+        // box (README): as a decision's numbers it read "gamma 0.97 [-1, 3]" on the demo's
+        // swash loss, and a class read from it said bias. Its set is in the estimates.
+        let e = st.channels[0].last;
         // Both filters raise it: higher when they did so within `agree_s` of each other.
         // (Only when both of its own channels alarm: alarms taken over from other motors, or
         // an old alarm since cleared, say nothing about the two filters agreeing in time.)
@@ -1266,12 +1260,6 @@ impl Diagnoser {
             detail: None,
         }
     }
-}
-
-/// The channel whose numbers a decision by the filters in `mask` carries: the MIT-UKF's when
-/// it is among them (or none is), the MIT-ESMF's when it decides alone.
-fn numbers_from(mask: u8) -> usize {
-    if mask == 0b10 { 1 } else { 0 }
 }
 
 /// Solve the `k`×`k` system in `a` (augmented with the right-hand side in column `k`) by
@@ -1626,52 +1614,6 @@ mod tests {
             delta_hi: delta_half,
             ..Default::default()
         }
-    }
-
-    #[test]
-    fn a_decision_by_the_set_filter_alone_carries_its_numbers() {
-        // Quad X, motor 2 at gamma 0.6 in the MIT-ESMF's set only for 12 s; the MIT-UKF reads
-        // healthy throughout (gamma 1.01, bounds containing 1). The decision, its class and
-        // its clearing (after the set reads healthy again) carry the set filter's numbers.
-        let p = Profile::resolve("quad-x").unwrap();
-        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
-        let healthy = healthy_estimate(0.02);
-        let ukf = [AhcEstimate {
-            gamma: 1.01,
-            ..healthy
-        }; 4];
-        let mut set = [healthy; 4];
-        set[1].gamma = 0.6;
-        set[1].gamma_lo = 0.52;
-        set[1].gamma_hi = 0.68;
-        set[1].delta = 0.01;
-        set[1].delta_lo = -0.03;
-        set[1].delta_hi = 0.05;
-        let mut out = vec![];
-        let mut decided = vec![];
-        for k in 0..1000 {
-            let t = k as f64 * 0.02;
-            let now = if t < 12.0 { &set } else { &[healthy; 4] };
-            d.update(t, &[0.5 + 0.2 * (t * 4.0).sin(); 4], &[&ukf, now], &mut out);
-            decided.append(&mut out);
-        }
-        let first = decided
-            .iter()
-            .find(|x| x.event == Event::Fault)
-            .expect("the set filter decides");
-        assert_eq!(first.actuator.as_deref(), Some("motor2"));
-        assert_eq!(first.filters, vec!["mit-esmf"]);
-        assert_eq!(first.class, Some(FaultClass::LossOfEffectiveness));
-        assert_eq!(first.gamma, Some(0.6));
-        assert_eq!(first.gamma_bounds, Some([0.52, 0.68]));
-        assert_eq!(first.delta, Some(0.01));
-        assert_eq!(first.delta_bounds, Some([-0.03, 0.05]));
-        let cleared = decided
-            .iter()
-            .find(|x| x.event == Event::Cleared)
-            .expect("cleared once the set reads healthy");
-        assert_eq!(cleared.actuator.as_deref(), Some("motor2"));
-        assert_eq!(cleared.gamma, Some(1.0), "{cleared:?}");
     }
 
     #[test]
