@@ -463,6 +463,27 @@ impl Diagnoser {
         }
     }
 
+    /// A motor whose alarm waits for the data: while they clearly name another actuator, or,
+    /// naming none, while every alarming filter reads it as giving more than commanded
+    /// (motors fail low). In the first fraction of a second after a motor fails the filters
+    /// can put it on another motor: calm quad X, motor 2 at 0.6 read as motor 1 at gamma 1.53
+    /// within 0.24 s; calm hexa X, motor 3 as motor 5's loss; both decided before the change
+    /// test had its 0.2 s. A second motor failing later is decided once the single-actuator
+    /// fit no longer names the first clearly.
+    fn held_for_the_data(&self, j: usize, filters: u8) -> bool {
+        let st = &self.actuators[j];
+        let named = self
+            .reading
+            .filter(|r| r.margin_over(r.next_actuator_drop) >= DATA_MARGIN)
+            .map(|r| r.actuator);
+        self.is_motor[j]
+            && named != Some(j)
+            && (named.is_some()
+                || (0..2)
+                    .filter(|f| filters & (1 << f) != 0)
+                    .all(|f| st.channels[f].e > 0.0))
+    }
+
     /// The motor the change test pins an offset or a stuck output on, with its isolation
     /// margin.
     fn pinned_motor_offset(&self) -> Option<usize> {
@@ -1010,6 +1031,7 @@ impl Diagnoser {
             };
             let st = &self.actuators[j];
             match (st.active, class) {
+                (None, _) if self.held_for_the_data(j, filters) => {}
                 (None, c) => {
                     let mut d = self.decision(t, j, Event::Fault, Some(c), filters);
                     d.also = self.also(j);
