@@ -268,29 +268,36 @@ fn gamma_off_after_5s_is_what_the_steps_say() {
     );
 }
 
+/// Every decision of one seed of a built-in vehicle scenario, as the eval makes them.
+fn decisions(name: &str, seed: u64) -> Vec<ahcmon::diagnose::vehicle::Decision> {
+    use ahcmon::diagnose::vehicle::Decision;
+    use ahcmon::estimate::vehicle::AhcEstimate;
+    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
+    use ahcmon::sim::vehicle::VehicleSample;
+    struct All(Vec<Decision>);
+    impl StepSink for All {
+        fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
+        fn decision(&mut self, d: &Decision) {
+            self.0.push(d.clone());
+        }
+    }
+    let mut all = All(vec![]);
+    run_vehicle_scenario(&resolve(name).unwrap(), seed, false, &mut all).unwrap();
+    all.0
+}
+
 /// Hexa X motor 5 stuck high looks, in the rates, like opposite motor 6 losing thrust: the
 /// first fault decision names motor 5, as the actuator or as the alternative in its detail
 /// (the isolation itself picks motor 6: README, issue 4 status).
 #[test]
 fn a_stuck_high_hexa_motor_is_at_least_named() {
-    use ahcmon::diagnose::vehicle::{Decision, Event};
-    use ahcmon::estimate::vehicle::AhcEstimate;
-    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
-    use ahcmon::sim::vehicle::VehicleSample;
-    struct Faults(Vec<Decision>);
-    impl StepSink for Faults {
-        fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
-        fn decision(&mut self, d: &Decision) {
-            if d.event == Event::Fault {
-                self.0.push(d.clone());
-            }
-        }
-    }
-    let named = resolve("hexa-x-motor5-stuck").unwrap();
+    use ahcmon::diagnose::vehicle::Event;
     for seed in 1..=3 {
-        let mut faults = Faults(vec![]);
-        run_vehicle_scenario(&named, seed, false, &mut faults).unwrap();
-        let first = faults.0.first().expect("no fault decision");
+        let all = decisions("hexa-x-motor5-stuck", seed);
+        let first = all
+            .iter()
+            .find(|d| d.event == Event::Fault)
+            .expect("no fault decision");
         let named_motor5 = first.actuator.as_deref() == Some("motor5")
             || first
                 .detail
@@ -305,22 +312,9 @@ fn a_stuck_high_hexa_motor_is_at_least_named() {
 /// in a `changed` decision), not decided as a fault of its own.
 #[test]
 fn a_decided_motor_loss_the_data_pin_holds_the_alarm_it_spreads() {
-    use ahcmon::diagnose::vehicle::{Decision, Event};
-    use ahcmon::estimate::vehicle::AhcEstimate;
-    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
-    use ahcmon::sim::vehicle::VehicleSample;
-    struct All(Vec<Decision>);
-    impl StepSink for All {
-        fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
-        fn decision(&mut self, d: &Decision) {
-            self.0.push(d.clone());
-        }
-    }
-    let named = resolve("hexa-x-motor3-loe").unwrap();
-    let mut all = All(vec![]);
-    run_vehicle_scenario(&named, 4, false, &mut all).unwrap();
-    let faults: Vec<&Decision> = all
-        .0
+    use ahcmon::diagnose::vehicle::Event;
+    let all = decisions("hexa-x-motor3-loe", 4);
+    let faults: Vec<_> = all
         .iter()
         .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
         .collect();
