@@ -34,7 +34,8 @@
 //! gain_threshold) - 1` (units of seconds over threshold) per filter, alarm when it passes
 //! `cusum_h_s`; clearing when both have stayed below half their thresholds for `clear_s`
 //! (hysteresis). Every alarmed actuator is a fault decision (but see the change test above for
-//! motors whose alarms a pinned motor takes over); `also` names the others alarmed at
+//! motors whose alarms a pinned motor takes over, and `held_for_the_data` for a motor's first
+//! alarm waiting up to `HOLD_MAX_S` for the data); `also` names the others alarmed at
 //! the time. Both thresholds are calibrated on healthy Monte-Carlo flights with gusts and model
 //! mismatch (`ahcmon thresholds`), never on the fault scenarios; a profile without a
 //! `gain_threshold` has no gain term.
@@ -288,6 +289,10 @@ const MIN_OWN_FRACTION: f64 = 0.25;
 /// How long a new class must hold before a `changed` decision reports it (no chatter while
 /// gain and bias settle, e.g. right after a fault is removed).
 const CLASS_HOLD_S: f64 = 1.0;
+/// Longest a motor's alarm waits for the data before it is decided (`held_for_the_data`): a
+/// filters' misreading at a fault's onset lasts its alarm plus the 2 s of clearing; 3 s
+/// bounds how late a real fault it holds is said.
+const HOLD_MAX_S: f64 = 3.0;
 
 /// A motor's excess explaining at least this fraction of what another motor's loss explains
 /// is named as the alternative in the decision, when the pair is one the airframe cannot tell
@@ -468,10 +473,19 @@ impl Diagnoser {
     /// (motors fail low). In the first fraction of a second after a motor fails the filters
     /// can put it on another motor: calm quad X, motor 2 at 0.6 read as motor 1 at gamma 1.53
     /// within 0.24 s; calm hexa X, motor 3 as motor 5's loss; both decided before the change
-    /// test had its 0.2 s. A second motor failing later is decided once the single-actuator
-    /// fit no longer names the first clearly.
-    fn held_for_the_data(&self, j: usize, filters: u8) -> bool {
+    /// test had its 0.2 s. Such a misreading clears within `clear_s` of its end; a hold lasts
+    /// at most `HOLD_MAX_S` from the alarm, so a real fault is decided by then at the latest
+    /// (a second motor failing while the data name the first, a motor really giving more
+    /// where the data give no reading, as across the gaps of a lossy link).
+    fn held_for_the_data(&self, j: usize, filters: u8, t: f64) -> bool {
         let st = &self.actuators[j];
+        let alarmed_at = (0..2)
+            .filter(|f| filters & (1 << f) != 0)
+            .map(|f| st.channels[f].alarm_since)
+            .fold(t, f64::min);
+        if t - alarmed_at >= HOLD_MAX_S {
+            return false;
+        }
         let named = self
             .reading
             .filter(|r| r.margin_over(r.next_actuator_drop) >= DATA_MARGIN)
@@ -927,7 +941,8 @@ impl Diagnoser {
         // motor's (and are listed with it, `also`), not as faults of their own. A decided
         // motor's gain loss takes over the alarms that start while the data pin it (gusts made
         // the filters spread hexa motor 3's loss onto motor 1 13 s after the onset), and keeps
-        // each while it lasts; a motor alarming while no pin holds is decided on its own.
+        // each while it lasts; a motor alarming while no pin holds is decided on its own
+        // (after `held_for_the_data`, at most `HOLD_MAX_S`).
         let mut alarms = [0u8; crate::model::MAX_ACTUATORS];
         for (bits, st) in alarms.iter_mut().zip(&self.actuators) {
             *bits = (0..2)
@@ -1031,7 +1046,7 @@ impl Diagnoser {
             };
             let st = &self.actuators[j];
             match (st.active, class) {
-                (None, _) if self.held_for_the_data(j, filters) => {}
+                (None, _) if self.held_for_the_data(j, filters, t) => {}
                 (None, c) => {
                     let mut d = self.decision(t, j, Event::Fault, Some(c), filters);
                     d.also = self.also(j);
@@ -1636,6 +1651,35 @@ mod tests {
             delta_hi: delta_half,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_motor_giving_more_is_decided_when_the_data_say_nothing() {
+        // Quad X, motor 1 reads gamma 1.5 in both filters from t = 8 s and no residuals reach
+        // the change test (a lossy link clears them at every gap): its alarm waits for the
+        // data, at most HOLD_MAX_S, then it is decided.
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let healthy = healthy_estimate(0.02);
+        let mut more = [healthy; 4];
+        more[0].gamma = 1.5;
+        more[0].gamma_lo = 1.45;
+        more[0].gamma_hi = 1.55;
+        let mut out = vec![];
+        let mut faults = vec![];
+        for k in 0..1000 {
+            let t = k as f64 * 0.02;
+            let est = if t >= 8.0 { &more } else { &[healthy; 4] };
+            d.update(t, &[0.5 + 0.2 * (t * 4.0).sin(); 4], &[est, est], &mut out);
+            faults.extend(out.drain(..).filter(|x| x.event == Event::Fault));
+        }
+        let first = faults.first().expect("decided");
+        assert_eq!(first.actuator.as_deref(), Some("motor1"), "{faults:?}");
+        // The alarm comes within a second of the change; the hold adds HOLD_MAX_S.
+        assert!(
+            first.t >= 8.0 + HOLD_MAX_S && first.t <= 8.0 + HOLD_MAX_S + 1.0,
+            "{first:?}"
+        );
     }
 
     #[test]
