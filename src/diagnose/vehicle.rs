@@ -486,10 +486,7 @@ impl Diagnoser {
         if t - alarmed_at >= HOLD_MAX_S {
             return false;
         }
-        let named = self
-            .reading
-            .filter(|r| r.margin_over(r.next_actuator_drop) >= DATA_MARGIN)
-            .map(|r| r.actuator);
+        let named = self.naming_reading().map(|r| r.actuator);
         self.is_motor[j]
             && named != Some(j)
             && (named.is_some()
@@ -498,14 +495,19 @@ impl Diagnoser {
                     .all(|f| st.channels[f].e > 0.0))
     }
 
+    /// The change test's reading when it names its actuator clearly against every other one.
+    fn naming_reading(&self) -> Option<Reading> {
+        self.reading
+            .filter(|r| r.margin_over(r.next_actuator_drop) >= DATA_MARGIN)
+    }
+
     /// The motor the change test pins an offset or a stuck output on, with its isolation
     /// margin.
     fn pinned_motor_offset(&self) -> Option<usize> {
-        self.reading
+        self.naming_reading()
             .filter(|r| {
                 self.is_motor[r.actuator]
                     && matches!(r.kind, ChangeKind::Offset | ChangeKind::Stuck)
-                    && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
             })
             .map(|r| r.actuator)
     }
@@ -515,13 +517,12 @@ impl Diagnoser {
     /// Not kept beyond the reading (a gain is something the filters represent, and a second
     /// motor's fault must not stay hidden behind the first).
     fn pinned_decided_gain(&self) -> Option<usize> {
-        self.reading
+        self.naming_reading()
             .filter(|r| {
                 self.is_motor[r.actuator]
                     && r.kind == ChangeKind::Gain
                     && r.value < 1.0 - self.params.loe_tau
                     && self.actuators[r.actuator].active.is_some()
-                    && r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
             })
             .map(|r| r.actuator)
     }
@@ -848,10 +849,7 @@ impl Diagnoser {
         } else {
             None
         };
-        let preferred = self
-            .reading
-            .filter(|r| r.margin_over(r.next_actuator_drop) >= DATA_MARGIN)
-            .map(|r| r.actuator);
+        let preferred = self.naming_reading().map(|r| r.actuator);
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
         let mut prior_decided = [None; 2];
         for (k, (xs, rs)) in explained.iter_mut().zip(&raw).enumerate() {
@@ -885,10 +883,8 @@ impl Diagnoser {
         let before = (1.0 / self.dt).round() as usize;
         let confirmed = self.reading.map(|r| r.actuator).filter(|&j| {
             self.data_class(j).is_some()
-                && self.reading.is_some_and(|r| {
-                    r.margin_over(r.next_actuator_drop) >= DATA_MARGIN
-                        && r.samples + before <= self.change.len()
-                        && self.beyond_thresholds(&r)
+                && self.naming_reading().is_some_and(|r| {
+                    r.samples + before <= self.change.len() && self.beyond_thresholds(&r)
                 })
         });
         for j in 0..l {
