@@ -153,8 +153,10 @@ enum Command {
         request_rates: Option<f64>,
     },
     /// The built-in demonstration: a simulated H3-120 helicopter flies in this process over
-    /// loopback UDP to the monitor; at 32 s swash servo 2 loses 40 % effectiveness, at 45 s the
-    /// tail servo gets a bias; it ends by itself after 58 s.
+    /// loopback UDP to the monitor; 32 s into the flight swash servo 2 loses 40 % effectiveness,
+    /// at 45 s the tail servo gets a bias; it ends by itself after 58 s. The monitor shows the
+    /// autopilot's clock, which reads 10 s when the flight starts: the faults come at t=42 s
+    /// and t=55 s.
     Demo {
         /// Print the decisions instead of showing the dashboard (automatic when stdout is not a
         /// terminal).
@@ -412,6 +414,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             let speed = in_range("--speed", speed, SPEED_RANGE.0, SPEED_RANGE.1)?;
             eprintln!("demo: {}", named.scenario.description);
+            eprintln!(
+                "demo: on the autopilot's clock, which the monitor shows: {}",
+                ahcmon::link::simulate::script_on_vehicle_clock(&named.scenario)
+            );
             let args = RunArgs {
                 profile: None,
                 decisions,
@@ -677,6 +683,9 @@ fn monitor(
             }
             None => None,
         };
+        let script = demo
+            .as_ref()
+            .map(|d| ahcmon::link::simulate::script_on_vehicle_clock(&d.named.scenario));
         // demo: the simulated vehicle flies in this process, over loopback UDP to the monitor.
         let sim = match (demo, local) {
             (Some(d), Some(addr)) => {
@@ -696,10 +705,12 @@ fn monitor(
         };
         let mut ui = if dashboard {
             files.echo = false;
-            Some(
-                ahcmon::output::dashboard::TerminalUi::start(&spec.to_string())
-                    .context("cannot start the dashboard (try --headless)")?,
-            )
+            let mut ui = ahcmon::output::dashboard::TerminalUi::start(&spec.to_string())
+                .context("cannot start the dashboard (try --headless)")?;
+            if let Some(script) = script {
+                ui.set_note(format!("script: {script}"));
+            }
+            Some(ui)
         } else {
             None
         };

@@ -141,3 +141,23 @@ fn link_lost_in_the_footer_at_both_sizes() {
         assert_eq!(s.lines().count(), h as usize);
     }
 }
+
+#[test]
+fn the_header_carries_the_demo_script() {
+    // The demo's faults are told on the clock the decisions use (the autopilot's, 10 s ahead).
+    let named = ahcmon::scenario::resolve("heli-demo").unwrap();
+    let script = ahcmon::link::simulate::script_on_vehicle_clock(&named.scenario);
+    let (m, d, hist) = state_at(41.5);
+    let mut term = Terminal::new(TestBackend::new(200, 40)).unwrap();
+    let ui = UiState {
+        note: Some(script.clone()),
+        ..Default::default()
+    };
+    term.draw(|f| render(f, &m, &d, &hist, &ui, &LinkInfo::default()))
+        .unwrap();
+    let buf = term.backend().buffer().clone();
+    let header: String = (0..200).map(|x| buf[(x, 0)].symbol().to_string()).collect();
+    assert!(header.contains("sysid 1 helicopter"), "{header}");
+    assert!(header.contains("swash2 gain 0.6 at t=42 s"), "{header}");
+    assert!(header.contains("tail bias +0.15 at t=55 s"), "{header}");
+}

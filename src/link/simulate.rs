@@ -14,6 +14,36 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 
+/// The scenario's faults and end as the monitor will show them: on the simulated autopilot's
+/// clock, which reads `BOOT_OFFSET_S` at the scenario's start (a vehicle is not connected to at
+/// boot). E.g. `swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s`.
+pub fn script_on_vehicle_clock(scenario: &crate::scenario::Scenario) -> String {
+    let clock = |t: f64| {
+        let v = t + BOOT_OFFSET_S;
+        if (v - v.round()).abs() < 1e-9 {
+            format!("t={v:.0} s")
+        } else {
+            format!("t={v} s")
+        }
+    };
+    let faults: Vec<String> = scenario
+        .faults
+        .iter()
+        .map(|f| {
+            let until = f
+                .until
+                .map_or(String::new(), |u| format!(" until {}", clock(u)));
+            format!("{} at {}{until}", f.describe(), clock(f.t))
+        })
+        .collect();
+    let faults = if faults.is_empty() {
+        "no faults".to_string()
+    } else {
+        faults.join(", ")
+    };
+    format!("{faults}; ends at {}", clock(scenario.duration_s))
+}
+
 pub struct FlyOptions {
     pub sysid: u8,
     pub seed: u64,
@@ -114,4 +144,16 @@ pub async fn fly(
         w.flush()?;
     }
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_demo_script_is_told_on_the_clock_the_monitor_shows() {
+        let named = crate::scenario::resolve("heli-demo").unwrap();
+        assert_eq!(
+            super::script_on_vehicle_clock(&named.scenario),
+            "swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s"
+        );
+    }
 }

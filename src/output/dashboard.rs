@@ -27,6 +27,8 @@ pub struct UiState {
     pub paused: bool,
     pub frozen: bool,
     pub help: bool,
+    /// A line of context after the vehicle (the demo's script, in the vehicle's clock).
+    pub note: Option<String>,
 }
 
 /// The link as the footer shows it.
@@ -199,6 +201,12 @@ fn header(
     }
     if ui.paused {
         spans.push(Span::styled("  PAUSED", Style::default().fg(Color::Yellow)));
+    }
+    if let Some(note) = &ui.note {
+        spans.push(Span::styled(
+            format!("  {note}"),
+            Style::default().fg(Color::DarkGray),
+        ));
     }
     f.render_widget(Paragraph::new(Line::from(spans)), area);
 }
@@ -534,6 +542,11 @@ impl TerminalUi {
             },
             frames_window: VecDeque::new(),
         })
+    }
+
+    /// Show `note` in the header (see [`UiState::note`]).
+    pub fn set_note(&mut self, note: String) {
+        self.ui.note = Some(note);
     }
 
     /// Read pending keys without waiting.

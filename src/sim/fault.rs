@@ -78,6 +78,40 @@ impl Fault {
     }
 
     /// Which coefficient the fault moves: used to pick the settling criterion.
+    /// What the fault does, in a few words: `swash2 gain 0.6`, `tail bias +0.15`,
+    /// `motor5 stuck at 0.55`, `lon sine bias 0.02`, `lon ramp over 5 s to gain 0.5`.
+    pub fn describe(&self) -> String {
+        let mut what = Vec::new();
+        if let Some(p) = self.stuck {
+            what.push(format!("stuck at {p}"));
+        } else {
+            if let Some(g) = self.gamma {
+                what.push(format!("gain {g}"));
+            }
+            if let Some(d) = self.delta {
+                what.push(format!("bias {d:+}"));
+            }
+            if let Some(s) = self.sine {
+                what.push(format!("sine bias {}", s.amplitude));
+            }
+            if let Some(r) = self.ramp {
+                let mut to = Vec::new();
+                if r.gamma != 1.0 {
+                    to.push(format!("gain {}", r.gamma));
+                }
+                if r.delta != 0.0 {
+                    to.push(format!("bias {:+}", r.delta));
+                }
+                what.push(format!(
+                    "ramp over {} s to {}",
+                    r.duration_s,
+                    to.join(" and ")
+                ));
+            }
+        }
+        format!("{} {}", self.actuator, what.join(", "))
+    }
+
     pub fn moves_gamma(&self) -> bool {
         self.stuck.is_some() || self.gamma.is_some() || self.ramp.is_some_and(|r| r.gamma != 1.0)
     }
@@ -142,6 +176,29 @@ mod tests {
 
     fn fault(toml: &str) -> Fault {
         toml::from_str(toml).unwrap()
+    }
+
+    #[test]
+    fn describe_says_what_the_fault_does() {
+        let cases = [
+            ("actuator='swash2'\nt=32.0\ngamma=0.6", "swash2 gain 0.6"),
+            ("actuator='tail'\nt=45.0\ndelta=0.15", "tail bias +0.15"),
+            (
+                "actuator='motor5'\nt=15.0\nstuck=0.55",
+                "motor5 stuck at 0.55",
+            ),
+            (
+                "actuator='lon'\nt=1.0\nramp={duration_s=5.0, gamma=0.5}",
+                "lon ramp over 5 s to gain 0.5",
+            ),
+            (
+                "actuator='lon'\nt=1.0\ngamma=0.8\ndelta=-0.02",
+                "lon gain 0.8, bias -0.02",
+            ),
+        ];
+        for (toml, want) in cases {
+            assert_eq!(fault(toml).describe(), want, "{toml}");
+        }
     }
 
     #[test]
