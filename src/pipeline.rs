@@ -106,6 +106,17 @@ enum Stage {
     Failed,
 }
 
+/// What the take-off test saw, to say why a run never started estimating.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FlightGate {
+    /// Complete samples seen, and those with the vehicle armed.
+    pub samples: u64,
+    pub armed_samples: u64,
+    /// Longest armed stretch (s) and the highest relative altitude while armed (m).
+    pub longest_armed_s: f64,
+    pub max_rel_alt_armed: Option<f64>,
+}
+
 /// Counters of the pipeline itself.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct PipelineCounters {
@@ -137,6 +148,7 @@ pub struct VehiclePipeline {
     /// The identified discrete model, for `dynamics = "arx"` profiles.
     pub arx: Option<crate::model::calibrate::ArxFit>,
     pub counters: PipelineCounters,
+    pub gate: FlightGate,
     /// Last estimates (vehicle time, per filter and actuator), for summaries and dashboards.
     pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
     /// Vehicle time of the last sample seen (any stage).
@@ -189,6 +201,7 @@ impl VehiclePipeline {
             fit: None,
             arx: None,
             counters: PipelineCounters::default(),
+            gate: FlightGate::default(),
             last: None,
             last_sample_t: None,
             active: [None; MAX_ACTUATORS],
@@ -225,6 +238,30 @@ impl VehiclePipeline {
         }
     }
 
+    /// Why the run has not estimated anything yet, when it has not (`None` once it has).
+    pub fn why_not_estimating(&self) -> Option<String> {
+        if self.counters.steps > 0 || !matches!(self.stage, Stage::Grounded) {
+            return None;
+        }
+        let g = &self.gate;
+        Some(if g.armed_samples == 0 {
+            format!(
+                "the vehicle never armed in these {} samples (HEARTBEAT base_mode); the monitor estimates in flight only",
+                g.samples
+            )
+        } else if let Some(h) = g.max_rel_alt_armed {
+            format!(
+                "armed for up to {:.1} s, but never above {} m relative altitude (highest {h:.1} m), so never taken as airborne",
+                g.longest_armed_s, self.cfg.airborne_alt_m
+            )
+        } else {
+            format!(
+                "armed for up to {:.1} s without a relative altitude; {} s armed counts as airborne",
+                g.longest_armed_s, self.cfg.armed_airborne_s
+            )
+        })
+    }
+
     pub fn stage_name(&self) -> &'static str {
         match self.stage {
             Stage::Grounded => "waiting for flight",
@@ -248,11 +285,18 @@ impl VehiclePipeline {
     }
 
     fn airborne(&mut self, s: &TelemetrySample) -> bool {
+        self.gate.samples += 1;
         if !s.armed {
             self.armed_since = None;
             return false;
         }
         let since = *self.armed_since.get_or_insert(s.t);
+        let g = &mut self.gate;
+        g.armed_samples += 1;
+        g.longest_armed_s = g.longest_armed_s.max(s.t - since);
+        if let Some(h) = s.rel_alt {
+            g.max_rel_alt_armed = Some(g.max_rel_alt_armed.map_or(h, |m: f64| m.max(h)));
+        }
         match s.rel_alt {
             Some(h) => h > self.cfg.airborne_alt_m,
             None => s.t - since >= self.cfg.armed_airborne_s,

@@ -223,3 +223,37 @@ fn paced_replay_does_not_sleep_through_a_garbage_timestamp() {
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
 }
+
+#[test]
+fn a_replay_that_never_estimates_says_why() {
+    // Real ArduSub logs: one never arms; the other arms on the surface (relative altitude 0)
+    // and sends SERVO_OUTPUT_RAW at 2 Hz against ATTITUDE at 10 Hz.
+    let (code, out, err) = ahcmon(&[
+        "replay",
+        common::data("mavlink/rust-mavlink-log.tlog")
+            .to_str()
+            .unwrap(),
+        "--headless",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("no estimates: the vehicle never armed in these 36 samples"),
+        "{out}"
+    );
+    let (code, out, err) = ahcmon(&[
+        "replay",
+        common::data("mavlink/mavlink-server-00025-2024-04-22_18-49-07.tlog")
+            .to_str()
+            .unwrap(),
+        "--headless",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("no estimates: armed for up to") && out.contains("never taken as airborne"),
+        "{out}"
+    );
+    assert!(
+        out.contains("most rate instants had no outputs of the same instant (2378 against 13"),
+        "{out}"
+    );
+}

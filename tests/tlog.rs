@@ -3,13 +3,9 @@
 
 use ahcmon::link::{MavMessage, TlogReader, TlogWriter};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
-fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("replay/tlogs")
-        .join(rel)
-}
+mod common;
+use common::data;
 
 fn read_all(bytes: &[u8]) -> (Vec<(u64, u32)>, ahcmon::link::FrameCounters) {
     let mut r = TlogReader::new(bytes);

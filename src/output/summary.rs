@@ -56,6 +56,18 @@ pub fn render(
             pc.missing_az,
             pc.missing_output
         );
+        if let Some(why) = p.why_not_estimating() {
+            let _ = writeln!(s, "  no estimates: {why}");
+        }
+        if c.unmatched > c.samples {
+            let _ = writeln!(
+                s,
+                "  most rate instants had no outputs of the same instant ({} against {} complete samples): \
+                 the outputs come slower than the attitude; ask the autopilot for SERVO_OUTPUT_RAW at \
+                 the ATTITUDE rate (ArduPilot SRn_RC_CHAN, or `monitor --request-rates`)",
+                c.unmatched, c.samples
+            );
+        }
         if let Some(d) = &p.detection {
             let _ = writeln!(s, "  profile: {}", d.source);
         }

@@ -48,3 +48,10 @@ pub fn temp_dir(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+/// A log under `replay/tlogs` (copies of `../shared/data`, with their SOURCE.md).
+pub fn data(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("replay/tlogs")
+        .join(rel)
+}
