@@ -161,3 +161,23 @@ fn the_header_carries_the_demo_script() {
     assert!(header.contains("swash2 gain 0.6 at t=42 s"), "{header}");
     assert!(header.contains("tail bias +0.15 at t=55 s"), "{header}");
 }
+
+#[test]
+fn a_link_that_never_spoke_is_not_called_lost() {
+    let (m, d, hist) = state_at(12.0);
+    let mut term = Terminal::new(TestBackend::new(100, 30)).unwrap();
+    let link = LinkInfo {
+        name: "udpin:0.0.0.0:14550".into(),
+        lost: true,
+        data_age_s: None,
+        ..Default::default()
+    };
+    term.draw(|f| render(f, &m, &d, &hist, &UiState::default(), &link))
+        .unwrap();
+    let buf = term.backend().buffer().clone();
+    let footer: String = (0..100)
+        .map(|x| buf[(x, 29)].symbol().to_string())
+        .collect();
+    assert!(footer.contains("NO DATA YET"), "{footer}");
+    assert!(!footer.contains("LINK LOST"), "{footer}");
+}

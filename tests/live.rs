@@ -517,3 +517,34 @@ fn sim_interrupted_leaves_a_whole_tlog() {
         r.counters
     );
 }
+
+/// A monitor that hears nothing says so once (a wrong port looks like this), and its summary
+/// says no vehicle was seen.
+#[test]
+fn a_silent_link_is_told_not_waited_on_quietly() {
+    let port = free_udp_port();
+    let child = Command::new(bin())
+        .args(["monitor", &format!("udpin:127.0.0.1:{port}"), "--headless"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(6000));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{stdout} {stderr}");
+    assert_eq!(
+        stderr.matches("nothing received in 5 s").count(),
+        1,
+        "{stderr}"
+    );
+    assert!(stdout.contains("no vehicle seen"), "{stdout}");
+}

@@ -11,6 +11,9 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
 
+/// How long a link may stay silent from the start before the headless monitor says so.
+const NO_DATA_HINT: Duration = Duration::from_secs(5);
+
 #[derive(Debug, Clone, Copy)]
 pub struct LiveOptions {
     /// No frame from a vehicle for this long: `link_lost`.
@@ -97,6 +100,7 @@ pub async fn run(
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
+    let mut silence_told = false;
     let mut rates = RateRequests::default();
     // 10 Hz: link-loss checks, alerts and the dashboard's redraw.
     let mut tick = tokio::time::interval(Duration::from_millis(100));
@@ -141,6 +145,18 @@ pub async fn run(
                         let detail = format!("no frame for {:.1} s", opts.link_timeout.as_secs_f64());
                         sink.link_event(&Decision::monitor(t, *sysid, Event::LinkLost, detail));
                     }
+                }
+                // Headless, say once that nothing arrives (the dashboard's footer says it).
+                if any_frame.is_none()
+                    && ui.is_none()
+                    && !silence_told
+                    && clock.elapsed() > NO_DATA_HINT
+                {
+                    silence_told = true;
+                    eprintln!(
+                        "monitor: nothing received in {} s; check that the vehicle or ground station sends to this address (e.g. MAVProxy --out udp:HOST:PORT for udpin:0.0.0.0:PORT)",
+                        NO_DATA_HINT.as_secs()
+                    );
                 }
                 if let (Some(idle), Some(last)) = (opts.exit_idle, any_frame)
                     && now.duration_since(last) > idle

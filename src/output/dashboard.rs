@@ -434,7 +434,13 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
 }
 
 fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, ui: &UiState) {
-    let state = if link.lost {
+    let state = if link.data_age_s.is_none() {
+        // Nothing has arrived yet: a wrong port or a silent sender, not a lost link.
+        Span::styled(
+            " NO DATA YET ",
+            Style::default().fg(Color::Black).bg(Color::Yellow),
+        )
+    } else if link.lost {
         Span::styled(
             " LINK LOST ",
             Style::default().fg(Color::White).bg(Color::Red),
