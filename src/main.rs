@@ -98,8 +98,10 @@ enum Command {
         /// Truth JSONL: per step, every actuator's true gamma and delta and the noise in force.
         #[arg(long, value_name = "FILE")]
         truth: Option<PathBuf>,
+        /// Decisions JSONL of the monitor running on the flight (one object a line).
         #[arg(long, value_name = "FILE")]
         decisions: Option<PathBuf>,
+        /// Estimates JSONL (both filters, every actuator, every step).
         #[arg(long, value_name = "FILE")]
         estimates: Option<PathBuf>,
         /// Seed (default: the scenario's).
@@ -165,8 +167,10 @@ enum Command {
         /// Another vehicle scenario instead of the built-in one (heli-demo).
         #[arg(long, value_name = "FILE|NAME")]
         scenario: Option<String>,
+        /// Decisions JSONL (one object a line).
         #[arg(long, value_name = "FILE")]
         decisions: Option<PathBuf>,
+        /// Estimates JSONL (both filters, every actuator, every step).
         #[arg(long, value_name = "FILE")]
         estimates: Option<PathBuf>,
         /// Also send the alerts to a planner (see `monitor --alerts`).
