@@ -991,7 +991,8 @@ fn replay(
 #[error("{0}")]
 struct UsageError(String);
 
-/// One vehicle run with its JSONL files; prints what was written and the decisions.
+/// One vehicle run with its JSONL files; with `print`, the decisions as they are made and
+/// then what was written.
 fn run_with_files(
     named: &NamedScenario,
     seed: u64,
@@ -1005,6 +1006,7 @@ fn run_with_files(
         ))
         .into());
     }
+    files.echo = print;
     let run = run_vehicle_scenario(named, seed, false, &mut files)?;
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
@@ -1014,11 +1016,12 @@ fn run_with_files(
     let truth_lines = files.truth.as_ref().map_or(0, |(w, _, _)| w.lines);
     if print {
         outln!(
-            "{}: {} s of {} (seed {}): {} decision lines, {} estimate lines, {} truth lines",
+            "{}: {} s of {} (seed {}), {} decisions; written: {} decision lines, {} estimate lines, {} truth lines",
             named.name,
             named.scenario.duration_s,
             run.vehicle,
             seed,
+            files.decisions_made,
             count(&files.decisions),
             count(&files.estimates),
             truth_lines

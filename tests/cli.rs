@@ -257,3 +257,23 @@ fn a_replay_that_never_estimates_says_why() {
         "{out}"
     );
 }
+
+#[test]
+fn sim_without_files_prints_its_decisions() {
+    let (code, out, err) = ahcmon(&["sim", "--scenario", "quad-x-motor2-loe"]);
+    assert_eq!(code, 0, "{err}");
+    let lines: Vec<&str> = out.lines().filter(|l| l.starts_with("t=")).collect();
+    assert!(
+        lines
+            .first()
+            .is_some_and(|l| l.contains("fault  motor2") && l.contains("loss_of_effectiveness")),
+        "{out}"
+    );
+    assert!(
+        out.contains(&format!(
+            "{} decisions; written: 0 decision lines",
+            lines.len()
+        )),
+        "{out}"
+    );
+}

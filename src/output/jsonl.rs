@@ -149,6 +149,10 @@ pub struct RunFiles {
     /// Write every k-th step's estimates.
     pub decimate: u64,
     pub sysid: u8,
+    /// Also print each decision to stdout as it is made (`sim`).
+    pub echo: bool,
+    /// Decisions made (written or not).
+    pub decisions_made: u64,
     steps: u64,
     pub error: Option<std::io::Error>,
 }
@@ -165,6 +169,8 @@ impl RunFiles {
             truth: None,
             decimate: decimate.max(1),
             sysid: 1,
+            echo: false,
+            decisions_made: 0,
             steps: 0,
             error: None,
         })
@@ -205,6 +211,14 @@ impl StepSink for RunFiles {
     }
 
     fn decision(&mut self, d: &Decision) {
+        self.decisions_made += 1;
+        if self.echo {
+            use std::io::Write as _;
+            // A convenience copy, as for the monitor: a closed pipe stops the echo only.
+            if writeln!(std::io::stdout(), "{}", describe(d)).is_err() {
+                self.echo = false;
+            }
+        }
         if let Some(w) = self.decisions.as_mut() {
             let r = w.write(d);
             self.keep(r);
