@@ -90,7 +90,8 @@ enum Command {
         json: bool,
     },
     /// Fly a vehicle scenario in the simulator (with the monitor's filters and diagnosis
-    /// running on it) and write its ground truth, decisions and estimates as JSON lines.
+    /// running on it), print its decisions as they are made, and write its ground truth,
+    /// decisions and estimates as JSON lines.
     Sim {
         /// Scenario file or built-in name (a vehicle scenario, e.g. quad-x-motor2-loe).
         #[arg(long)]
@@ -156,9 +157,9 @@ enum Command {
     },
     /// The built-in demonstration: a simulated H3-120 helicopter flies in this process over
     /// loopback UDP to the monitor; 32 s into the flight swash servo 2 loses 40 % effectiveness,
-    /// at 45 s the tail servo gets a bias; it ends by itself after 58 s. The monitor shows the
-    /// autopilot's clock, which reads 10 s when the flight starts: the faults come at t=42 s
-    /// and t=55 s.
+    /// at 45 s the tail servo gets a bias; headless it ends by itself after 58 s (the dashboard
+    /// stays until q). The monitor shows the autopilot's clock, which reads 10 s when the
+    /// flight starts: the faults come at t=42 s and t=55 s.
     Demo {
         /// Print the decisions instead of showing the dashboard (automatic when stdout is not a
         /// terminal).
@@ -951,6 +952,7 @@ fn replay(
     if let Some(ui) = ui.as_mut()
         && !quit
     {
+        ui.mark_ended();
         loop {
             if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(&monitor) {
                 break;

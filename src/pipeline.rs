@@ -115,6 +115,8 @@ pub struct FlightGate {
     /// Longest armed stretch (s) and the highest relative altitude while armed (m).
     pub longest_armed_s: f64,
     pub max_rel_alt_armed: Option<f64>,
+    /// Longest stretch taken as airborne (s); 0 if never.
+    pub longest_airborne_s: f64,
 }
 
 /// Counters of the pipeline itself.
@@ -239,12 +241,23 @@ impl VehiclePipeline {
     }
 
     /// Why the run has not estimated anything yet, when it has not (`None` once it has).
-    pub fn why_not_estimating(&self) -> Option<String> {
+    /// `heartbeat`: an autopilot HEARTBEAT was seen (without one the armed flag is unknown).
+    pub fn why_not_estimating(&self, heartbeat: bool) -> Option<String> {
         if self.counters.steps > 0 || !matches!(self.stage, Stage::Grounded) {
             return None;
         }
         let g = &self.gate;
-        Some(if g.armed_samples == 0 {
+        Some(if g.longest_airborne_s > 0.0 {
+            format!(
+                "airborne for at most {:.1} s, and no calibration completed (it starts {} s after take-off; a landing, a reboot or a failed fit, said above, start it over)",
+                g.longest_airborne_s, self.cfg.settle_s
+            )
+        } else if !heartbeat {
+            format!(
+                "no autopilot HEARTBEAT in these {} samples, so the vehicle was never known to be armed",
+                g.samples
+            )
+        } else if g.armed_samples == 0 {
             format!(
                 "the vehicle never armed in these {} samples (HEARTBEAT base_mode); the monitor estimates in flight only",
                 g.samples
@@ -376,6 +389,7 @@ impl VehiclePipeline {
             return;
         }
         let since = *self.airborne_since.get_or_insert(s.t);
+        self.gate.longest_airborne_s = self.gate.longest_airborne_s.max(s.t - since);
         match &mut self.stage {
             Stage::Failed => {}
             Stage::Grounded => {

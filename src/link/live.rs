@@ -153,8 +153,10 @@ pub async fn run(
                     && clock.elapsed() > NO_DATA_HINT
                 {
                     silence_told = true;
+                    // Only decoded frames reach here: bytes that never make a frame (a wrong
+                    // baud rate) look the same, and the summary counts them.
                     eprintln!(
-                        "monitor: nothing received in {} s; check that the vehicle or ground station sends to this address (e.g. MAVProxy --out udp:HOST:PORT for udpin:0.0.0.0:PORT)",
+                        "monitor: no MAVLink frame in {} s; check that the vehicle or ground station sends to this address (e.g. MAVProxy --out udp:HOST:PORT for udpin:0.0.0.0:PORT), and a serial link's baud rate",
                         NO_DATA_HINT.as_secs()
                     );
                 }

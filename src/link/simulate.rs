@@ -18,13 +18,10 @@ use std::io::BufWriter;
 /// clock, which reads `BOOT_OFFSET_S` at the scenario's start (a vehicle is not connected to at
 /// boot). E.g. `swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s`.
 pub fn script_on_vehicle_clock(scenario: &crate::scenario::Scenario) -> String {
+    // Two decimals at most (1.12 + 10 is 11.120000000000001 in floating point).
     let clock = |t: f64| {
-        let v = t + BOOT_OFFSET_S;
-        if (v - v.round()).abs() < 1e-9 {
-            format!("t={v:.0} s")
-        } else {
-            format!("t={v} s")
-        }
+        let v = format!("{:.2}", t + BOOT_OFFSET_S);
+        format!("t={} s", v.trim_end_matches('0').trim_end_matches('.'))
     };
     let faults: Vec<String> = scenario
         .faults

@@ -38,8 +38,10 @@ pub struct LinkInfo {
     pub counters: FrameCounters,
     /// Frames per second over the last second.
     pub rate_hz: f64,
-    /// Seconds since the last frame.
+    /// Seconds since the last frame; `None` before the first.
     pub data_age_s: Option<f64>,
+    /// A replayed log has ended (the dashboard stays until q).
+    pub ended: bool,
     pub lost: bool,
 }
 
@@ -434,7 +436,12 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
 }
 
 fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, ui: &UiState) {
-    let state = if link.data_age_s.is_none() {
+    let state = if link.ended {
+        Span::styled(
+            " END OF LOG ",
+            Style::default().fg(Color::Black).bg(Color::Gray),
+        )
+    } else if link.data_age_s.is_none() {
         // Nothing has arrived yet: a wrong port or a silent sender, not a lost link.
         Span::styled(
             " NO DATA YET ",
@@ -548,6 +555,11 @@ impl TerminalUi {
             },
             frames_window: VecDeque::new(),
         })
+    }
+
+    /// The replayed log has ended: the footer says so instead of a link state.
+    pub fn mark_ended(&mut self) {
+        self.link.ended = true;
     }
 
     /// Show `note` in the header (see [`UiState::note`]).

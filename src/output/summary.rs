@@ -6,6 +6,25 @@ use crate::link::FrameCounters;
 use crate::monitor::Monitor;
 use std::fmt::Write;
 
+/// Why most rate instants found no outputs: the outputs come less often, or they are stamped
+/// further from the rates than the pairing tolerance.
+fn unmatched_note(c: &crate::telemetry::assembler::TelemetryCounters, max_skew_s: f64) -> String {
+    let facts = format!(
+        "most rate instants had no outputs within {:.0} ms ({} of {} attitude messages; {} output messages)",
+        max_skew_s * 1e3,
+        c.unmatched,
+        c.rate_messages,
+        c.output_messages
+    );
+    if c.output_messages * 2 < c.rate_messages {
+        format!(
+            "{facts}: the outputs come less often than the attitude; ask the autopilot for both at the same rate (ArduPilot: SRn_RC_CHAN and SRn_EXTRA1; or `monitor --request-rates`)"
+        )
+    } else {
+        format!("{facts}: the outputs are stamped further than that from the attitude")
+    }
+}
+
 pub fn render(
     monitor: &Monitor,
     frames: &FrameCounters,
@@ -56,17 +75,11 @@ pub fn render(
             pc.missing_az,
             pc.missing_output
         );
-        if let Some(why) = p.why_not_estimating() {
+        if let Some(why) = p.why_not_estimating(v.info.mav_type.is_some()) {
             let _ = writeln!(s, "  no estimates: {why}");
         }
         if c.unmatched > c.samples {
-            let _ = writeln!(
-                s,
-                "  most rate instants had no outputs of the same instant ({} against {} complete samples): \
-                 the outputs come slower than the attitude; ask the autopilot for SERVO_OUTPUT_RAW at \
-                 the ATTITUDE rate (ArduPilot SRn_RC_CHAN, or `monitor --request-rates`)",
-                c.unmatched, c.samples
-            );
+            let _ = writeln!(s, "  {}", unmatched_note(c, v.max_skew()));
         }
         if let Some(d) = &p.detection {
             let _ = writeln!(s, "  profile: {}", d.source);

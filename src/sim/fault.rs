@@ -77,41 +77,55 @@ impl Fault {
         Some((gamma, delta))
     }
 
-    /// Which coefficient the fault moves: used to pick the settling criterion.
     /// What the fault does, in a few words: `swash2 gain 0.6`, `tail bias +0.15`,
     /// `motor5 stuck at 0.55`, `lon sine bias 0.02`, `lon ramp over 5 s to gain 0.5`.
     pub fn describe(&self) -> String {
+        // Three decimals at most: values come from TOML and products or sums of them.
+        let num = |v: f64| {
+            let s = format!("{v:.3}");
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        };
+        let signed = |v: f64| {
+            if v >= 0.0 {
+                format!("+{}", num(v))
+            } else {
+                num(v)
+            }
+        };
         let mut what = Vec::new();
         if let Some(p) = self.stuck {
-            what.push(format!("stuck at {p}"));
+            what.push(format!("stuck at {}", num(p)));
         } else {
-            if let Some(g) = self.gamma {
-                what.push(format!("gain {g}"));
+            let (g, d) = (self.gamma.unwrap_or(1.0), self.delta.unwrap_or(0.0));
+            if self.gamma.is_some() {
+                what.push(format!("gain {}", num(g)));
             }
-            if let Some(d) = self.delta {
-                what.push(format!("bias {d:+}"));
+            if self.delta.is_some() {
+                what.push(format!("bias {}", signed(d)));
             }
             if let Some(s) = self.sine {
-                what.push(format!("sine bias {}", s.amplitude));
+                what.push(format!("sine bias {}", num(s.amplitude)));
             }
             if let Some(r) = self.ramp {
+                // `health_at` multiplies the gain and adds the bias: say where it ends.
                 let mut to = Vec::new();
                 if r.gamma != 1.0 {
-                    to.push(format!("gain {}", r.gamma));
+                    to.push(format!("gain {}", num(g * r.gamma)));
                 }
                 if r.delta != 0.0 {
-                    to.push(format!("bias {:+}", r.delta));
+                    to.push(format!("bias {}", signed(d + r.delta)));
                 }
-                what.push(format!(
-                    "ramp over {} s to {}",
-                    r.duration_s,
-                    to.join(" and ")
-                ));
+                what.push(if to.is_empty() {
+                    format!("ramp over {} s (no change)", num(r.duration_s))
+                } else {
+                    format!("ramp over {} s to {}", num(r.duration_s), to.join(" and "))
+                });
             }
         }
         format!("{} {}", self.actuator, what.join(", "))
     }
 
+    /// Which coefficient the fault moves: used to pick the settling criterion.
     pub fn moves_gamma(&self) -> bool {
         self.stuck.is_some() || self.gamma.is_some() || self.ramp.is_some_and(|r| r.gamma != 1.0)
     }
@@ -194,6 +208,14 @@ mod tests {
             (
                 "actuator='lon'\nt=1.0\ngamma=0.8\ndelta=-0.02",
                 "lon gain 0.8, bias -0.02",
+            ),
+            (
+                "actuator='lon'\nt=1.0\ngamma=0.8\nramp={duration_s=5.0, gamma=0.5}",
+                "lon gain 0.8, ramp over 5 s to gain 0.4",
+            ),
+            (
+                "actuator='lon'\nt=1.0\nramp={duration_s=5.0, gamma=1.0}",
+                "lon ramp over 5 s (no change)",
             ),
         ];
         for (toml, want) in cases {

@@ -54,6 +54,10 @@ pub struct TelemetryCounters {
     pub dropped_at_reboot: u64,
     /// Messages with NaN / inf in the fields we use.
     pub non_finite: u64,
+    /// Rate (ATTITUDE) and output (SERVO_OUTPUT_RAW port 0, ACTUATOR_OUTPUT_STATUS) messages
+    /// received: far fewer outputs than rates leave most rate instants unmatched.
+    pub rate_messages: u64,
+    pub output_messages: u64,
 }
 
 /// What the vehicle said about itself: heartbeat and parameters.
@@ -296,6 +300,7 @@ impl VehicleAssembler {
                 if !self.tick(t) {
                     return None;
                 }
+                self.counters.rate_messages += 1;
                 if let Some(last) = self.last_sample_t {
                     if t < last {
                         self.counters.out_of_order += 1;
@@ -390,8 +395,8 @@ impl VehicleAssembler {
         }
     }
 
-    /// The pairing tolerance: the configured one, or under half the rate period if shorter.
-    fn max_skew(&self) -> f64 {
+    /// The pairing tolerance (s): the configured one, or under half the rate period if shorter.
+    pub fn max_skew(&self) -> f64 {
         self.rate_period
             .map_or(self.cfg.max_skew_s, |p| self.cfg.max_skew_s.min(0.45 * p))
     }
@@ -412,6 +417,7 @@ impl VehicleAssembler {
 
     /// New outputs, unless older than those held (a reordered message: counted, dropped).
     fn set_outputs(&mut self, t: f64, pwm: [u16; 16]) -> Option<TelemetrySample> {
+        self.counters.output_messages += 1;
         if self.outputs.is_some_and(|o| t < o.t) {
             self.counters.out_of_order += 1;
             return None;
