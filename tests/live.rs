@@ -489,12 +489,7 @@ fn sim_interrupted_leaves_a_whole_tlog() {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let out = child.wait_with_output().unwrap();
+    let out = interrupt(child);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -555,12 +550,7 @@ fn a_silent_link_is_told_not_waited_on_quietly() {
     }
     // A second's more silence must not repeat it.
     std::thread::sleep(std::time::Duration::from_millis(1000));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let out = child.wait_with_output().unwrap();
+    let out = interrupt(child);
     reader.join().unwrap();
     lines.extend(rx.try_iter());
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -572,4 +562,14 @@ fn a_silent_link_is_told_not_waited_on_quietly() {
         "{stderr}"
     );
     assert!(stdout.contains("no vehicle seen"), "{stdout}");
+}
+
+/// ctrl-c (SIGINT) to a child, then its output.
+fn interrupt(child: std::process::Child) -> std::process::Output {
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    child.wait_with_output().unwrap()
 }
