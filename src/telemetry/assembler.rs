@@ -364,16 +364,19 @@ impl VehicleAssembler {
                 self.set_outputs(t, pwm)
             }
             MavMessage::ACTUATOR_OUTPUT_STATUS(s) => {
-                // PX4: outputs as PWM-like values in `actuator[]`, `active` bitmask.
+                // PX4: the outputs' values (PWM µs for PWM outputs) in `actuator[]`; `active`
+                // is the number of outputs (PX4's ACTUATOR_OUTPUT_STATUS stream sends
+                // `actuator_outputs.noutputs`), not a bitmask, and 0 marks an unused channel.
                 let t = s.time_usec as f64 * 1e-6;
                 if !self.tick(t) {
                     return None;
                 }
+                let active = usize::try_from(s.active).unwrap_or(usize::MAX);
                 let mut pwm = [0u16; 16];
-                for (k, p) in pwm.iter_mut().enumerate() {
+                for (k, p) in pwm.iter_mut().enumerate().take(active) {
                     let v = s.actuator[k];
-                    if s.active & (1 << k) != 0 && v.is_finite() && (0.0..65535.0).contains(&v) {
-                        *p = v as u16;
+                    if v.is_finite() && (1.0..65535.0).contains(&v) {
+                        *p = v.round() as u16;
                     }
                 }
                 self.set_outputs(t, pwm)
@@ -553,6 +556,33 @@ mod tests {
             a.on_message(1, m, &mut out);
         }
         out
+    }
+
+    #[test]
+    fn px4_actuator_output_status_counts_its_active_outputs() {
+        use crate::link::dialects::ahcmon::ACTUATOR_OUTPUT_STATUS_DATA;
+        // PX4 sets `active` to the number of outputs (4 on a quad), not a bitmask (4 = 0b100
+        // would leave only output 3).
+        let mut actuator = [0.0f32; 32];
+        actuator[..5].copy_from_slice(&[1510.4, 1520.0, 1530.0, 1540.0, 1550.0]);
+        let px4 = |active: u32, actuator: [f32; 32]| {
+            MavMessage::ACTUATOR_OUTPUT_STATUS(ACTUATOR_OUTPUT_STATUS_DATA {
+                time_usec: 1_000_000,
+                active,
+                actuator,
+            })
+        };
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let got = feed(&mut a, &[attitude(1000), px4(4, actuator)]);
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].pwm[..6], [1510, 1520, 1530, 1540, 0, 0]);
+        assert_eq!(a.counters.output_messages, 1);
+        // A channel inside the count that reads 0 is unused, and NaN is never a PWM.
+        actuator[1] = 0.0;
+        actuator[2] = f32::NAN;
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let got = feed(&mut a, &[attitude(1000), px4(8, actuator)]);
+        assert_eq!(got[0].pwm[..6], [1510, 0, 0, 1540, 1550, 0]);
     }
 
     #[test]
