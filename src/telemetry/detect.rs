@@ -160,6 +160,9 @@ fn mapping_warnings(profile: &Profile, mapped: usize, sysid: u8) -> Vec<String> 
     out
 }
 
+/// ArduPilot's fixed swash servo travel each side of trim (µs).
+pub const SWASH_HALF_TRAVEL_US: f64 = 500.0;
+
 /// Map the profile's actuators to outputs and PWM ranges from ArduPilot's `SERVOn_FUNCTION`,
 /// `SERVOn_MIN/TRIM/MAX/REVERSED` and (motors) `MOT_PWM_MIN/MAX`. Returns how many actuators
 /// were mapped from parameters.
@@ -181,7 +184,17 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
         a.channel = n;
         mapped += 1;
         let get = |what: &str| info.param(&format!("SERVO{n}_{what}"));
-        if a.role.is_range() {
+        if a.role == Role::Swash {
+            // ArduPilot drives a swash servo at trim ± 500 µs for a full command
+            // (AP_MotorsHeli_Swash: `1500 + 500 * swash_in`, then `set_output_pwm_trimmed`);
+            // SERVOn_MIN/MAX only clip it, so they are not its scale.
+            let trim = get("TRIM").filter(|t| (800.0..=2200.0).contains(t));
+            let trim = trim.unwrap_or(a.pwm_trim);
+            a.pwm_trim = trim;
+            a.pwm_min = trim - SWASH_HALF_TRAVEL_US;
+            a.pwm_max = trim + SWASH_HALF_TRAVEL_US;
+            a.reversed = get("REVERSED").is_some_and(|r| r != 0.0);
+        } else if a.role.is_range() {
             match (info.param("MOT_PWM_MIN"), info.param("MOT_PWM_MAX")) {
                 (Some(lo), Some(hi)) if lo > 0.0 && hi > lo => {
                     a.pwm_min = lo;
@@ -254,5 +267,42 @@ mod tests {
         assert!(d.warnings.is_empty(), "{:?}", d.warnings);
         let d = quad(17);
         assert_eq!(d.profile.actuators[3].channel, 17);
+    }
+
+    #[test]
+    fn swash_servos_are_scaled_by_their_fixed_travel_not_their_limits() {
+        // ArduPilot drives swash servos at trim ± 500 µs; SERVOn_MIN/MAX only clip.
+        let d = detect(&info(
+            MavType::MAV_TYPE_HELICOPTER,
+            &[
+                ("H_SW_TYPE", 3.0),
+                ("SERVO1_FUNCTION", 33.0),
+                ("SERVO1_MIN", 1100.0),
+                ("SERVO1_TRIM", 1520.0),
+                ("SERVO1_MAX", 1900.0),
+                ("SERVO1_REVERSED", 1.0),
+                ("SERVO4_FUNCTION", 36.0),
+                ("SERVO4_MIN", 1100.0),
+                ("SERVO4_TRIM", 1500.0),
+                ("SERVO4_MAX", 1900.0),
+            ],
+        ))
+        .unwrap();
+        let p = &d.profile;
+        let swash1 = &p.actuators[0];
+        assert_eq!(
+            (
+                swash1.pwm_min,
+                swash1.pwm_trim,
+                swash1.pwm_max,
+                swash1.reversed
+            ),
+            (1020.0, 1520.0, 2020.0, true)
+        );
+        // 1770 µs is half a full command on the reversed servo.
+        assert!((p.normalise(0, 1770.0) + 0.5).abs() < 1e-12);
+        // The tail is an angle output scaled per side by its limits, as ArduPilot does.
+        let tail = p.actuators.iter().position(|a| a.name == "tail").unwrap();
+        assert!((p.normalise(tail, 1700.0) - 0.5).abs() < 1e-12);
     }
 }
