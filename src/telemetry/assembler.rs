@@ -110,6 +110,8 @@ pub struct VehicleAssembler {
     rates_used: bool,
     outputs: Option<Stamped<[u16; 16]>>,
     az: Option<Stamped<f64>>,
+    /// The message a_z is taken from (see `on_az`).
+    az_source: Option<AzSource>,
     rel_alt: Option<f64>,
     last_sample_t: Option<f64>,
     /// Latest vehicle time seen (s), for reboot detection and u32 µs unwrapping.
@@ -131,6 +133,18 @@ pub struct VehicleAssembler {
 /// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
 /// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
 /// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
+/// Where a_z comes from: one message type per run (see `VehicleAssembler::on_az`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AzSource {
+    HighresImu,
+    RawImu,
+    ScaledImu,
+    ScaledImu2,
+}
+
+/// A locked a_z source silent this long (s) gives way to another.
+const AZ_SOURCE_SILENT_S: f64 = 1.0;
+
 fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
     let raw = f64::from(stamp) * 1e-6;
     match reference_s {
@@ -155,6 +169,7 @@ impl VehicleAssembler {
             rates_used: false,
             outputs: None,
             az: None,
+            az_source: None,
             rel_alt: None,
             last_sample_t: None,
             clock: None,
@@ -381,18 +396,30 @@ impl VehicleAssembler {
                 }
                 self.set_outputs(t, pwm)
             }
-            MavMessage::HIGHRES_IMU(m) => self.on_az(m.time_usec as f64 * 1e-6, f64::from(m.zacc)),
-            MavMessage::SCALED_IMU(m) => {
-                self.on_az(f64::from(m.time_boot_ms) * 1e-3, f64::from(m.zacc) * 1e-3 * G0)
+            MavMessage::HIGHRES_IMU(m) => {
+                self.on_az(AzSource::HighresImu, m.time_usec as f64 * 1e-6, f64::from(m.zacc))
             }
-            MavMessage::SCALED_IMU2(m) => {
-                self.on_az(f64::from(m.time_boot_ms) * 1e-3, f64::from(m.zacc) * 1e-3 * G0)
-            }
+            MavMessage::SCALED_IMU(m) => self.on_az(
+                AzSource::ScaledImu,
+                f64::from(m.time_boot_ms) * 1e-3,
+                f64::from(m.zacc) * 1e-3 * G0,
+            ),
+            MavMessage::SCALED_IMU2(m) => self.on_az(
+                AzSource::ScaledImu2,
+                f64::from(m.time_boot_ms) * 1e-3,
+                f64::from(m.zacc) * 1e-3 * G0,
+            ),
             MavMessage::RAW_IMU(m)
                 // RAW_IMU is in mG only on ArduPilot (elsewhere raw sensor units).
                 if self.info.autopilot.is_none_or(|a| a == MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA) =>
             {
-                self.on_az(m.time_usec as f64 * 1e-6, f64::from(m.zacc) * 1e-3 * G0)
+                // Older ArduPilot stamps it with the 32-bit micros(), which wraps every 71.6
+                // min; a stamp that fits in 32 bits is unwrapped like SERVO_OUTPUT_RAW's.
+                let t = match u32::try_from(m.time_usec) {
+                    Ok(us) => unwrap_u32_us(us, self.clock),
+                    Err(_) => m.time_usec as f64 * 1e-6,
+                };
+                self.on_az(AzSource::RawImu, t, f64::from(m.zacc) * 1e-3 * G0)
             }
             _ => None,
         }
@@ -429,17 +456,26 @@ impl VehicleAssembler {
         self.try_emit()
     }
 
-    fn on_az(&mut self, t: f64, az: f64) -> Option<TelemetrySample> {
+    fn on_az(&mut self, source: AzSource, t: f64, az: f64) -> Option<TelemetrySample> {
         if !az.is_finite() {
             self.counters.non_finite += 1;
             return None;
         }
-        // Prefer one IMU: a second, differently stamped source would interleave.
+        // One IMU: ArduPilot streams RAW_IMU (IMU 1, µs stamps) with SCALED_IMU2/3 (other IMUs,
+        // ms stamps) and their biases differ, so a_z stays with the first source seen, unless
+        // it has been silent for AZ_SOURCE_SILENT_S.
+        if let (Some(locked), Some(prev)) = (self.az_source, self.az)
+            && locked != source
+            && t - prev.t < AZ_SOURCE_SILENT_S
+        {
+            return None;
+        }
         if let Some(prev) = self.az
             && t < prev.t
         {
             return None;
         }
+        self.az_source = Some(source);
         self.az = Some(Stamped { t, v: az });
         self.has_imu = true;
         None
@@ -556,6 +592,64 @@ mod tests {
             a.on_message(1, m, &mut out);
         }
         out
+    }
+
+    #[test]
+    fn a_z_stays_with_one_imu() {
+        use crate::link::dialects::ahcmon::SCALED_IMU2_DATA;
+        let imu2 = |ms: u32| {
+            MavMessage::SCALED_IMU2(SCALED_IMU2_DATA {
+                time_boot_ms: ms,
+                zacc: -1100,
+                ..Default::default()
+            })
+        };
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        // ArduPilot's RAW_SENSORS stream: RAW_IMU (IMU 1, -1000 mG) and SCALED_IMU2 (IMU 2,
+        // -1100 mG) of the same instant; IMU 2's ms stamp is not older, so it used to win.
+        let got = feed(
+            &mut a,
+            &[imu(1000), imu2(1000), attitude(1000), outputs(1000, 1500)],
+        );
+        assert_eq!(got.len(), 1);
+        assert!((got[0].az.unwrap() + G0).abs() < 1e-9, "{:?}", got[0].az);
+        // IMU 1 silent for over a second: IMU 2 takes over.
+        let got = feed(&mut a, &[imu2(2100), attitude(2100), outputs(2100, 1500)]);
+        assert!(
+            (got[0].az.unwrap() + 1.1 * G0).abs() < 1e-9,
+            "{:?}",
+            got[0].az
+        );
+    }
+
+    #[test]
+    fn a_32_bit_raw_imu_stamp_is_unwrapped() {
+        // Older ArduPilot: RAW_IMU.time_usec is micros() (u32), wrapped after 4294.97 s, like
+        // SERVO_OUTPUT_RAW's; ATTITUDE's ms stamp is not.
+        let ms = 4_300_000u32;
+        let wrapped = (u64::from(ms) * 1000 % (1u64 << 32)) as u32;
+        let servo = MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
+            time_usec: wrapped,
+            servo1_raw: 1500,
+            ..Default::default()
+        });
+        let raw = MavMessage::RAW_IMU(RAW_IMU_DATA {
+            time_usec: u64::from(wrapped),
+            zacc: -1000,
+            ..Default::default()
+        });
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let got = feed(
+            &mut a,
+            &[attitude(ms - 20), raw.clone(), attitude(ms), servo],
+        );
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].t, 4300.0);
+        assert!(
+            got[0].az.is_some_and(|z| (z + G0).abs() < 1e-9),
+            "{:?}",
+            got[0].az
+        );
     }
 
     #[test]

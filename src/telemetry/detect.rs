@@ -164,8 +164,9 @@ fn mapping_warnings(profile: &Profile, mapped: usize, sysid: u8) -> Vec<String> 
 pub const SWASH_HALF_TRAVEL_US: f64 = 500.0;
 
 /// Map the profile's actuators to outputs and PWM ranges from ArduPilot's `SERVOn_FUNCTION`,
-/// `SERVOn_MIN/TRIM/MAX/REVERSED` and (motors) `MOT_PWM_MIN/MAX`. Returns how many actuators
-/// were mapped from parameters.
+/// `SERVOn_MIN/TRIM/MAX/REVERSED`, (motors) `MOT_PWM_MIN/MAX` or the throttle stick's
+/// `RCn_MIN/MAX`, and (swash servos) their fixed travel. Returns how many actuators were
+/// mapped from parameters.
 pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
     let mut mapped = 0;
     let mut seen = std::collections::BTreeMap::<Role, usize>::new();
@@ -194,21 +195,35 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
             a.pwm_min = trim - SWASH_HALF_TRAVEL_US;
             a.pwm_max = trim + SWASH_HALF_TRAVEL_US;
             a.reversed = get("REVERSED").is_some_and(|r| r != 0.0);
-        } else if a.role.is_range() {
-            match (info.param("MOT_PWM_MIN"), info.param("MOT_PWM_MAX")) {
-                (Some(lo), Some(hi)) if lo > 0.0 && hi > lo => {
-                    a.pwm_min = lo;
-                    a.pwm_max = hi;
-                }
-                _ => {
-                    if let (Some(lo), Some(hi)) = (get("MIN"), get("MAX"))
-                        && hi > lo
-                    {
-                        a.pwm_min = lo;
-                        a.pwm_max = hi;
-                    }
-                }
+        } else if a.role == Role::Motor {
+            // AP_MotorsMulticopter::get_pwm_output_min/max: MOT_PWM_MIN/MAX when both are set,
+            // else the throttle stick's calibrated range, RC{RCMAP_THROTTLE}_MIN/MAX.
+            let throttle_rc = info.param("RCMAP_THROTTLE").map_or(3, |n| n as u32);
+            let valid = |lo: Option<f64>, hi: Option<f64>| match (lo, hi) {
+                (Some(lo), Some(hi)) if lo > 0.0 && hi > lo => Some((lo, hi)),
+                _ => None,
+            };
+            let range = valid(info.param("MOT_PWM_MIN"), info.param("MOT_PWM_MAX"))
+                .or_else(|| {
+                    valid(
+                        info.param(&format!("RC{throttle_rc}_MIN")),
+                        info.param(&format!("RC{throttle_rc}_MAX")),
+                    )
+                })
+                .or_else(|| valid(get("MIN"), get("MAX")));
+            if let Some((lo, hi)) = range {
+                a.pwm_min = lo;
+                a.pwm_max = hi;
             }
+        } else if a.role.is_range() {
+            // A plane's throttle: SRV_Channel scales it over SERVOn_MIN..MAX, reversed if set.
+            if let (Some(lo), Some(hi)) = (get("MIN"), get("MAX"))
+                && hi > lo
+            {
+                a.pwm_min = lo;
+                a.pwm_max = hi;
+            }
+            a.reversed = get("REVERSED").is_some_and(|r| r != 0.0);
         } else if let (Some(lo), Some(trim), Some(hi)) = (get("MIN"), get("TRIM"), get("MAX"))
             && lo < trim
             && trim < hi
@@ -304,5 +319,42 @@ mod tests {
         // The tail is an angle output scaled per side by its limits, as ArduPilot does.
         let tail = p.actuators.iter().position(|a| a.name == "tail").unwrap();
         assert!((p.normalise(tail, 1700.0) - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn motor_range_falls_back_to_the_throttle_stick_not_the_servo_limits() {
+        let quad = |extra: &[(&str, f32)]| {
+            let mut params = vec![
+                ("FRAME_TYPE", 1.0),
+                ("SERVO1_FUNCTION", 33.0),
+                ("SERVO1_MIN", 1100.0),
+                ("SERVO1_MAX", 1900.0),
+                ("RC3_MIN", 1050.0),
+                ("RC3_MAX", 1950.0),
+            ];
+            params.extend_from_slice(extra);
+            let d = detect(&info(MavType::MAV_TYPE_QUADROTOR, &params)).unwrap();
+            let m = &d.profile.actuators[0];
+            (m.pwm_min, m.pwm_max)
+        };
+        // MOT_PWM_MIN/MAX both set: they rule.
+        assert_eq!(
+            quad(&[("MOT_PWM_MIN", 1000.0), ("MOT_PWM_MAX", 2000.0)]),
+            (1000.0, 2000.0)
+        );
+        // Left at 0 (ArduCopter's default): the throttle channel's calibrated range.
+        assert_eq!(
+            quad(&[("MOT_PWM_MIN", 0.0), ("MOT_PWM_MAX", 0.0)]),
+            (1050.0, 1950.0)
+        );
+        // Throttle mapped to RC 1.
+        assert_eq!(
+            quad(&[
+                ("RCMAP_THROTTLE", 1.0),
+                ("RC1_MIN", 990.0),
+                ("RC1_MAX", 2010.0)
+            ]),
+            (990.0, 2010.0)
+        );
     }
 }
