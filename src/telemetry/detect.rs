@@ -54,8 +54,19 @@ pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
     let frame_type = info.param("FRAME_TYPE");
     let name = match mav_type {
         MavType::MAV_TYPE_HELICOPTER => {
+            // H3 generic (0, an older default) with servos at -60/60/180° and no phase angle is
+            // the H3-120 head by another name.
+            let generic_is_120 = [
+                ("H_SW_H3_SV1_POS", -60.0),
+                ("H_SW_H3_SV2_POS", 60.0),
+                ("H_SW_H3_SV3_POS", 180.0),
+                ("H_SW_H3_PHANG", 0.0),
+            ]
+            .iter()
+            .all(|(k, want)| info.param(k).is_some_and(|v| (v - want).abs() < 0.5));
             match info.param("H_SW_TYPE") {
                 Some(v) if v as i64 == 3 => {}
+                Some(v) if v as i64 == 0 && generic_is_120 => {}
                 Some(v) => warnings.push(format!(
                     "sysid {sysid}: H_SW_TYPE {v} is not H3-120, the only swashplate with a built-in profile; estimates assume H3-120 (write a profile for your head and pass --profile FILE)"
                 )),
@@ -355,6 +366,40 @@ mod tests {
                 ("RC1_MAX", 2010.0)
             ]),
             (990.0, 2010.0)
+        );
+    }
+
+    #[test]
+    fn an_h3_generic_head_at_120_degrees_is_h3_120() {
+        let heli = |extra: &[(&str, f32)]| {
+            let mut params = vec![("H_SW_TYPE", 0.0)];
+            params.extend_from_slice(extra);
+            detect(&info(MavType::MAV_TYPE_HELICOPTER, &params)).unwrap()
+        };
+        let at_120 = [
+            ("H_SW_H3_SV1_POS", -60.0),
+            ("H_SW_H3_SV2_POS", 60.0),
+            ("H_SW_H3_SV3_POS", 180.0),
+            ("H_SW_H3_PHANG", 0.0),
+        ];
+        let d = heli(&at_120);
+        assert!(
+            !d.warnings.iter().any(|w| w.contains("H_SW_TYPE")),
+            "{:?}",
+            d.warnings
+        );
+        // Servos elsewhere: a head the built-in profile does not describe.
+        let d = heli(&[
+            ("H_SW_H3_SV1_POS", -45.0),
+            ("H_SW_H3_SV2_POS", 45.0),
+            ("H_SW_H3_SV3_POS", 180.0),
+        ]);
+        assert!(
+            d.warnings
+                .iter()
+                .any(|w| w.contains("H_SW_TYPE 0 is not H3-120")),
+            "{:?}",
+            d.warnings
         );
     }
 }
