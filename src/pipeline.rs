@@ -399,7 +399,7 @@ impl VehiclePipeline {
                 let detection = match &self.cfg.profile {
                     Some(p) => Ok(Detection {
                         profile: p.clone(),
-                        warnings: vec![],
+                        warnings: crate::telemetry::detect::given_profile_warnings(p, info),
                         source: format!("{} (--profile)", p.name),
                     }),
                     None => detect(info),

@@ -130,11 +130,9 @@ pub struct VehicleAssembler {
     pending: Option<TelemetrySample>,
 }
 
-/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
-/// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
-/// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
-/// Where a_z comes from: one message type per run (see `VehicleAssembler::on_az`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Where a_z comes from: one message type per run (see `VehicleAssembler::on_az`), in order
+/// of preference.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 enum AzSource {
     HighresImu,
     RawImu,
@@ -145,6 +143,9 @@ enum AzSource {
 /// A locked a_z source silent this long (s) gives way to another.
 const AZ_SOURCE_SILENT_S: f64 = 1.0;
 
+/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
+/// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
+/// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
 fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
     let raw = f64::from(stamp) * 1e-6;
     match reference_s {
@@ -225,6 +226,7 @@ impl VehicleAssembler {
         self.rates = None;
         self.outputs = None;
         self.az = None;
+        self.az_source = None;
         self.last_sample_t = None;
         self.clock = Some(t);
         true
@@ -462,10 +464,11 @@ impl VehicleAssembler {
             return None;
         }
         // One IMU: ArduPilot streams RAW_IMU (IMU 1, µs stamps) with SCALED_IMU2/3 (other IMUs,
-        // ms stamps) and their biases differ, so a_z stays with the first source seen, unless
-        // it has been silent for AZ_SOURCE_SILENT_S.
+        // ms stamps) and their biases differ, so a_z comes from one source: a preferred one
+        // takes over at once (it may start later, e.g. after a rate request), a less preferred
+        // one only after the source in use has been silent for AZ_SOURCE_SILENT_S.
         if let (Some(locked), Some(prev)) = (self.az_source, self.az)
-            && locked != source
+            && source > locked
             && t - prev.t < AZ_SOURCE_SILENT_S
         {
             return None;
@@ -620,6 +623,17 @@ mod tests {
             "{:?}",
             got[0].az
         );
+        // IMU 1 back (e.g. its rate requested): the preferred source takes over at once.
+        let got = feed(
+            &mut a,
+            &[imu(2120), imu2(2120), attitude(2120), outputs(2120, 1500)],
+        );
+        assert!((got[0].az.unwrap() + G0).abs() < 1e-9, "{:?}", got[0].az);
+        // SCALED_IMU2 first and slow, RAW_IMU later at the rate: RAW_IMU is used.
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        feed(&mut a, &[imu2(1000)]);
+        let got = feed(&mut a, &[imu(1020), attitude(1020), outputs(1020, 1500)]);
+        assert!((got[0].az.unwrap() + G0).abs() < 1e-9, "{:?}", got[0].az);
     }
 
     #[test]

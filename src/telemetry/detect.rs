@@ -171,8 +171,37 @@ fn mapping_warnings(profile: &Profile, mapped: usize, sysid: u8) -> Vec<String> 
     out
 }
 
-/// ArduPilot's fixed swash servo travel each side of trim (µs).
+/// ArduPilot's fixed swash servo travel each side of trim (µs), from 4.0 on.
 pub const SWASH_HALF_TRAVEL_US: f64 = 500.0;
+
+/// A TradHeli before 4.0 (its swashplate parameter was `H_SWASH_TYPE`, now `H_SW_TYPE`).
+fn pre_4_0_heli(info: &VehicleInfo) -> bool {
+    info.param("H_SWASH_TYPE").is_some() && info.param("H_SW_TYPE").is_none()
+}
+
+/// Warnings for a profile given with `--profile` on a vehicle whose parameters say how it
+/// drives its outputs: a swash servo whose range is not ArduPilot's fixed trim ± 500 µs reads
+/// its offsets and stuck positions scaled.
+pub fn given_profile_warnings(profile: &Profile, info: &VehicleInfo) -> Vec<String> {
+    if info.param("H_SW_TYPE").is_none() {
+        return Vec::new();
+    }
+    profile
+        .actuators
+        .iter()
+        .filter(|a| a.role == Role::Swash)
+        .filter(|a| {
+            (a.pwm_max - a.pwm_trim - SWASH_HALF_TRAVEL_US).abs() > 1.0
+                || (a.pwm_trim - a.pwm_min - SWASH_HALF_TRAVEL_US).abs() > 1.0
+        })
+        .map(|a| {
+            format!(
+                "sysid {}: {} in the profile spans {}..{} µs about {} µs; ArduPilot drives swash servos at trim ± {SWASH_HALF_TRAVEL_US} µs (SERVOn_MIN/MAX only clip), so its offsets and stuck positions read scaled (write pwm_min/pwm_max = trim ∓ 500)",
+                info.sysid, a.name, a.pwm_min, a.pwm_max, a.pwm_trim
+            )
+        })
+        .collect()
+}
 
 /// Map the profile's actuators to outputs and PWM ranges from ArduPilot's `SERVOn_FUNCTION`,
 /// `SERVOn_MIN/TRIM/MAX/REVERSED`, (motors) `MOT_PWM_MIN/MAX` or the throttle stick's
@@ -196,10 +225,12 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
         a.channel = n;
         mapped += 1;
         let get = |what: &str| info.param(&format!("SERVO{n}_{what}"));
-        if a.role == Role::Swash {
+        if a.role == Role::Swash && !pre_4_0_heli(info) {
             // ArduPilot drives a swash servo at trim ± 500 µs for a full command
             // (AP_MotorsHeli_Swash: `1500 + 500 * swash_in`, then `set_output_pwm_trimmed`);
-            // SERVOn_MIN/MAX only clip it, so they are not its scale.
+            // SERVOn_MIN/MAX only clip it, so they are not its scale. (Before 4.0, with
+            // H_SWASH_TYPE, the servos were scaled per side by SERVOn_MIN/TRIM/MAX: the angle
+            // branch below.)
             let trim = get("TRIM").filter(|t| (800.0..=2200.0).contains(t));
             let trim = trim.unwrap_or(a.pwm_trim);
             a.pwm_trim = trim;
@@ -214,14 +245,20 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
                 (Some(lo), Some(hi)) if lo > 0.0 && hi > lo => Some((lo, hi)),
                 _ => None,
             };
-            let range = valid(info.param("MOT_PWM_MIN"), info.param("MOT_PWM_MAX"))
-                .or_else(|| {
-                    valid(
-                        info.param(&format!("RC{throttle_rc}_MIN")),
-                        info.param(&format!("RC{throttle_rc}_MAX")),
-                    )
-                })
-                .or_else(|| valid(get("MIN"), get("MAX")));
+            let (mot_min, mot_max) = (info.param("MOT_PWM_MIN"), info.param("MOT_PWM_MAX"));
+            // Without MOT_PWM_* in the stream the profile's range stands (today's defaults).
+            let range = if mot_min.is_none() && mot_max.is_none() {
+                None
+            } else {
+                valid(mot_min, mot_max)
+                    .or_else(|| {
+                        valid(
+                            info.param(&format!("RC{throttle_rc}_MIN")),
+                            info.param(&format!("RC{throttle_rc}_MAX")),
+                        )
+                    })
+                    .or_else(|| valid(get("MIN"), get("MAX")))
+            };
             if let Some((lo, hi)) = range {
                 a.pwm_min = lo;
                 a.pwm_max = hi;
@@ -361,12 +398,16 @@ mod tests {
         // Throttle mapped to RC 1.
         assert_eq!(
             quad(&[
+                ("MOT_PWM_MIN", 0.0),
+                ("MOT_PWM_MAX", 0.0),
                 ("RCMAP_THROTTLE", 1.0),
                 ("RC1_MIN", 990.0),
                 ("RC1_MAX", 2010.0)
             ]),
             (990.0, 2010.0)
         );
+        // No MOT_PWM_* in the stream: the profile's range (today's defaults), not RC3's.
+        assert_eq!(quad(&[]), (1000.0, 2000.0));
     }
 
     #[test]
@@ -400,6 +441,45 @@ mod tests {
                 .any(|w| w.contains("H_SW_TYPE 0 is not H3-120")),
             "{:?}",
             d.warnings
+        );
+    }
+
+    #[test]
+    fn swash_scaling_follows_the_firmware_and_a_given_profile_is_checked() {
+        // Before 4.0 (H_SWASH_TYPE): per side by SERVOn_MIN/TRIM/MAX.
+        let d = detect(&info(
+            MavType::MAV_TYPE_HELICOPTER,
+            &[
+                ("H_SWASH_TYPE", 0.0),
+                ("SERVO1_FUNCTION", 33.0),
+                ("SERVO1_MIN", 1100.0),
+                ("SERVO1_TRIM", 1500.0),
+                ("SERVO1_MAX", 1900.0),
+            ],
+        ))
+        .unwrap();
+        let s1 = &d.profile.actuators[0];
+        assert_eq!((s1.pwm_min, s1.pwm_max), (1100.0, 1900.0));
+        // A profile written with the clip limits, given to a 4.x heli: said once per servo.
+        let mut p = Profile::resolve("heli-h3-120").unwrap();
+        assert!(
+            given_profile_warnings(
+                &p,
+                &info(MavType::MAV_TYPE_HELICOPTER, &[("H_SW_TYPE", 3.0)])
+            )
+            .is_empty()
+        );
+        p.actuators[1].pwm_min = 1100.0;
+        p.actuators[1].pwm_max = 1900.0;
+        let w = given_profile_warnings(
+            &p,
+            &info(MavType::MAV_TYPE_HELICOPTER, &[("H_SW_TYPE", 3.0)]),
+        );
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("swash2") && w[0].contains("1100..1900"),
+            "{}",
+            w[0]
         );
     }
 }
