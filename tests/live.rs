@@ -350,6 +350,11 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
 /// The monitor on udpin beside a stand-in autopilot; returns what the autopilot received and
 /// the monitor's stderr.
 fn vehicle_hears(extra: &[&str]) -> (Value, String) {
+    vehicle_hears_as(extra, "3")
+}
+
+/// As `vehicle_hears`, from an autopilot of the given MAV_AUTOPILOT (3 ArduPilot, 12 PX4).
+fn vehicle_hears_as(extra: &[&str], autopilot: &str) -> (Value, String) {
     let port = free_udp_port();
     let monitor = Command::new(bin())
         .args([
@@ -365,7 +370,12 @@ fn vehicle_hears(extra: &[&str]) -> (Value, String) {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(300));
-    let vehicle = common::run_python(&["tests/reference/fake_vehicle.py", &port.to_string(), "4"]);
+    let vehicle = common::run_python(&[
+        "tests/reference/fake_vehicle.py",
+        &port.to_string(),
+        "4",
+        autopilot,
+    ]);
     let out = monitor.wait_with_output().unwrap();
     assert!(
         out.status.success(),
@@ -405,6 +415,18 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
         stderr.contains("COMMAND_ACK SET_MESSAGE_INTERVAL 3/3"),
         "{stderr}"
     );
+
+    // PX4's RAW_IMU is in sensor units, which the monitor does not read: it asks for HIGHRES_IMU.
+    let (heard, stderr) = vehicle_hears_as(&["--request-rates", "25"], "12");
+    let mut ids: Vec<u32> = heard
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["param1"].as_f64().unwrap() as u32)
+        .collect();
+    ids.sort();
+    assert_eq!(ids, vec![30, 36, 105], "{heard}");
+    assert!(stderr.contains("HIGHRES_IMU at 25 Hz"), "{stderr}");
 }
 
 /// The serial transport through a real pseudo-terminal (tests/reference/serial_feeder.py writes

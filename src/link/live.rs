@@ -22,8 +22,8 @@ pub struct LiveOptions {
     pub exit_idle: Option<Duration>,
     /// Frames buffered between the reader and the estimators.
     pub channel_capacity: usize,
-    /// `--request-rates HZ`: ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU at
-    /// this rate (SET_MESSAGE_INTERVAL), the only thing ever sent on the vehicle link.
+    /// `--request-rates HZ`: ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU
+    /// (HIGHRES_IMU from a non-ArduPilot autopilot) at this rate (SET_MESSAGE_INTERVAL), the only thing ever sent on the vehicle link.
     pub request_rates: Option<f64>,
 }
 
@@ -198,8 +198,18 @@ pub async fn run(
     }
 }
 
-/// The messages the estimators need, by id: ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU.
-const NEEDED: [(u32, &str); 3] = [(30, "ATTITUDE"), (36, "SERVO_OUTPUT_RAW"), (27, "RAW_IMU")];
+/// The messages the estimators need, by id: ATTITUDE, SERVO_OUTPUT_RAW and the a_z source the
+/// assembler reads from this autopilot: RAW_IMU is in mG only on ArduPilot, so others (PX4)
+/// are asked for HIGHRES_IMU.
+fn needed(autopilot: crate::link::dialects::ahcmon::MavAutopilot) -> [(u32, &'static str); 3] {
+    use crate::link::dialects::ahcmon::MavAutopilot;
+    let imu = if autopilot == MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA {
+        (27, "RAW_IMU")
+    } else {
+        (105, "HIGHRES_IMU")
+    };
+    [(30, "ATTITUDE"), (36, "SERVO_OUTPUT_RAW"), imu]
+}
 /// How long the achieved rates are counted after the request.
 const RATE_WINDOW: Duration = Duration::from_secs(5);
 
@@ -207,8 +217,10 @@ const RATE_WINDOW: Duration = Duration::from_secs(5);
 /// after its first heartbeat; then its COMMAND_ACKs and the rates achieved are reported.
 #[derive(Default)]
 struct RateRequests {
-    /// sysid → (when requested, acks seen, frames of each needed message since, reported).
-    asked: BTreeMap<u8, (Instant, u32, [u64; 3], bool)>,
+    /// sysid → (when requested, acks seen, frames of each needed message since, reported,
+    /// the messages asked for).
+    #[allow(clippy::type_complexity)]
+    asked: BTreeMap<u8, (Instant, u32, [u64; 3], bool, [(u32, &'static str); 3])>,
     seq: u8,
 }
 
@@ -225,7 +237,7 @@ impl RateRequests {
         };
         let mut out = vec![];
         let sysid = frame.sysid;
-        if let Some((since, acks, counts, reported)) = self.asked.get_mut(&sysid) {
+        if let Some((since, acks, counts, reported, asked)) = self.asked.get_mut(&sysid) {
             if let MavMessage::COMMAND_ACK(a) = &frame.msg
                 && a.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
             {
@@ -238,13 +250,13 @@ impl RateRequests {
                     ),
                 );
             }
-            if let Some(k) = NEEDED.iter().position(|(id, _)| *id == frame.msg_id) {
+            if let Some(k) = asked.iter().position(|(id, _)| *id == frame.msg_id) {
                 counts[k] += 1;
             }
             let elapsed = since.elapsed();
             if !*reported && elapsed >= RATE_WINDOW {
                 *reported = true;
-                let achieved: Vec<String> = NEEDED
+                let achieved: Vec<String> = asked
                     .iter()
                     .zip(counts.iter())
                     .map(|((_, name), n)| {
@@ -273,7 +285,8 @@ impl RateRequests {
         {
             return out;
         }
-        for (id, _) in NEEDED {
+        let asked = needed(hb.autopilot);
+        for (id, _) in asked {
             let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
                 param1: id as f32,
                 param2: (1e6 / hz) as f32,
@@ -294,13 +307,16 @@ impl RateRequests {
             self.seq = self.seq.wrapping_add(1);
             out.push(bytes);
         }
+        let names: Vec<&str> = asked.iter().map(|(_, n)| *n).collect();
         sink.message(
             sysid,
             &format!(
-                "requested ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU at {hz} Hz (SET_MESSAGE_INTERVAL)"
+                "requested {} at {hz} Hz (SET_MESSAGE_INTERVAL)",
+                names.join(", ")
             ),
         );
-        self.asked.insert(sysid, (Instant::now(), 0, [0; 3], false));
+        self.asked
+            .insert(sysid, (Instant::now(), 0, [0; 3], false, asked));
         out
     }
 }

@@ -1,6 +1,7 @@
-"""A stand-in autopilot (pymavlink): sends HEARTBEAT (quadrotor, ArduPilot) to the monitor's
-udpin port for a few seconds, answers COMMAND_LONG with COMMAND_ACK (accepted), and prints
-as JSON everything the monitor sent it."""
+"""A stand-in autopilot (pymavlink): sends HEARTBEAT (quadrotor; ArduPilot, or the
+MAV_AUTOPILOT given as the third argument, e.g. 12 for PX4) to the monitor's udpin port for a
+few seconds, answers COMMAND_LONG with COMMAND_ACK (accepted), and prints as JSON everything the
+monitor sent it."""
 import json
 import sys
 import time
@@ -8,14 +9,15 @@ import time
 from pymavlink import mavutil
 
 port, secs = int(sys.argv[1]), float(sys.argv[2])
+autopilot = int(sys.argv[3]) if len(sys.argv) > 3 else 3
 m = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
 got = []
 end = time.time() + secs
 next_hb = 0.0
 while time.time() < end:
     if time.time() >= next_hb:
-        # MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_ARDUPILOTMEGA, armed + custom mode
-        m.mav.heartbeat_send(2, 3, 129, 4, 4)
+        # MAV_TYPE_QUADROTOR, the autopilot, armed + custom mode
+        m.mav.heartbeat_send(2, autopilot, 129, 4, 4)
         next_hb = time.time() + 0.5
     msg = m.recv_match(blocking=True, timeout=0.1)
     if msg is None or msg.get_type() == "BAD_DATA":
