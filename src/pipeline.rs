@@ -151,6 +151,8 @@ pub struct VehiclePipeline {
     pub arx: Option<crate::model::calibrate::ArxFit>,
     pub counters: PipelineCounters,
     pub gate: FlightGate,
+    /// Detection warnings already said.
+    warned: std::collections::BTreeSet<String>,
     /// Last estimates (vehicle time, per filter and actuator), for summaries and dashboards.
     pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
     /// Vehicle time of the last sample seen (any stage).
@@ -204,6 +206,7 @@ impl VehiclePipeline {
             arx: None,
             counters: PipelineCounters::default(),
             gate: FlightGate::default(),
+            warned: std::collections::BTreeSet::new(),
             last: None,
             last_sample_t: None,
             active: [None; MAX_ACTUATORS],
@@ -406,8 +409,11 @@ impl VehiclePipeline {
                 };
                 match detection {
                     Ok(d) => {
+                        // Once a run: detection runs again at every take-off until calibrated.
                         for w in &d.warnings {
-                            sink.message(self.sysid, &format!("warning: {w}"));
+                            if self.warned.insert(w.clone()) {
+                                sink.message(self.sysid, &format!("warning: {w}"));
+                            }
                         }
                         sink.message(
                             self.sysid,

@@ -285,7 +285,17 @@ impl RateRequests {
         {
             return out;
         }
-        let asked = needed(hb.autopilot);
+        // The autopilot as the assembler knows it (not a gimbal's or companion's heartbeat).
+        let Some(info) = monitor.assembler.vehicles.get(&sysid).map(|v| &v.info) else {
+            return out;
+        };
+        let (Some(autopilot), Some(compid)) = (info.autopilot, info.compid) else {
+            return out;
+        };
+        if compid != frame.compid {
+            return out;
+        }
+        let asked = needed(autopilot);
         for (id, _) in asked {
             let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
                 param1: id as f32,

@@ -110,8 +110,11 @@ pub struct VehicleAssembler {
     rates_used: bool,
     outputs: Option<Stamped<[u16; 16]>>,
     az: Option<Stamped<f64>>,
-    /// The message a_z is taken from (see `on_az`).
+    /// The message a_z is taken from (see `on_az`), its last interval (s), and the last stamp
+    /// of each source.
     az_source: Option<AzSource>,
+    az_interval: Option<f64>,
+    az_last: [Option<f64>; 4],
     rel_alt: Option<f64>,
     last_sample_t: Option<f64>,
     /// Latest vehicle time seen (s), for reboot detection and u32 µs unwrapping.
@@ -171,6 +174,8 @@ impl VehicleAssembler {
             outputs: None,
             az: None,
             az_source: None,
+            az_interval: None,
+            az_last: [None; 4],
             rel_alt: None,
             last_sample_t: None,
             clock: None,
@@ -227,6 +232,8 @@ impl VehicleAssembler {
         self.outputs = None;
         self.az = None;
         self.az_source = None;
+        self.az_interval = None;
+        self.az_last = [None; 4];
         self.last_sample_t = None;
         self.clock = Some(t);
         true
@@ -464,19 +471,32 @@ impl VehicleAssembler {
             return None;
         }
         // One IMU: ArduPilot streams RAW_IMU (IMU 1, µs stamps) with SCALED_IMU2/3 (other IMUs,
-        // ms stamps) and their biases differ, so a_z comes from one source: a preferred one
-        // takes over at once (it may start later, e.g. after a rate request), a less preferred
-        // one only after the source in use has been silent for AZ_SOURCE_SILENT_S.
+        // ms stamps) and their biases differ, so a_z comes from one source. A preferred one
+        // takes over once it comes about as often as the one in use (it may start later, e.g.
+        // after a rate request; a slower one would leave a_z sparse); a less preferred one only
+        // after the source in use has been silent for AZ_SOURCE_SILENT_S.
+        let k = source as usize;
+        let own_interval = self.az_last[k].map(|p| t - p);
+        self.az_last[k] = Some(t);
         if let (Some(locked), Some(prev)) = (self.az_source, self.az)
-            && source > locked
-            && t - prev.t < AZ_SOURCE_SILENT_S
+            && source != locked
         {
-            return None;
-        }
-        if let Some(prev) = self.az
-            && t < prev.t
-        {
-            return None;
+            let silent = t - prev.t >= AZ_SOURCE_SILENT_S;
+            let as_often = own_interval
+                .is_some_and(|i| i > 0.0 && i <= 1.5 * self.az_interval.unwrap_or(f64::INFINITY));
+            if !(silent || (source < locked && as_often)) {
+                return None;
+            }
+            self.az_interval = own_interval;
+        } else {
+            if let Some(prev) = self.az
+                && t <= prev.t
+            {
+                return None;
+            }
+            if let Some(prev) = self.az {
+                self.az_interval = Some(t - prev.t);
+            }
         }
         self.az_source = Some(source);
         self.az = Some(Stamped { t, v: az });
@@ -629,10 +649,23 @@ mod tests {
             &[imu(2120), imu2(2120), attitude(2120), outputs(2120, 1500)],
         );
         assert!((got[0].az.unwrap() + G0).abs() < 1e-9, "{:?}", got[0].az);
-        // SCALED_IMU2 first and slow, RAW_IMU later at the rate: RAW_IMU is used.
+        // RAW_IMU at 2 Hz against SCALED_IMU2 at 50 Hz: the slow one does not take a_z.
         let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
-        feed(&mut a, &[imu2(1000)]);
-        let got = feed(&mut a, &[imu(1020), attitude(1020), outputs(1020, 1500)]);
+        feed(&mut a, &[imu2(1000), imu2(1020), imu(1030), imu2(1040)]);
+        let got = feed(
+            &mut a,
+            &[imu(1530), imu2(1540), attitude(1540), outputs(1540, 1500)],
+        );
+        assert!(
+            (got[0].az.unwrap() + 1.1 * G0).abs() < 1e-9,
+            "{:?}",
+            got[0].az
+        );
+        // SCALED_IMU2 first and slow, RAW_IMU later at 50 Hz: RAW_IMU takes over from its
+        // second message.
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        feed(&mut a, &[imu2(1000), imu2(1500), imu(1500)]);
+        let got = feed(&mut a, &[imu(1520), attitude(1520), outputs(1520, 1500)]);
         assert!((got[0].az.unwrap() + G0).abs() < 1e-9, "{:?}", got[0].az);
     }
 

@@ -174,16 +174,19 @@ fn mapping_warnings(profile: &Profile, mapped: usize, sysid: u8) -> Vec<String> 
 /// ArduPilot's fixed swash servo travel each side of trim (µs), from 4.0 on.
 pub const SWASH_HALF_TRAVEL_US: f64 = 500.0;
 
-/// A TradHeli before 4.0 (its swashplate parameter was `H_SWASH_TYPE`, now `H_SW_TYPE`).
+/// An old TradHeli whose swash servos were scaled per side by SERVOn_MIN/TRIM/MAX: its
+/// swashplate parameter is `H_SWASH_TYPE` and it has none of the swash library's `H_SW_*`
+/// (whose `rc_write_swash` drives trim ± 500 µs).
 fn pre_4_0_heli(info: &VehicleInfo) -> bool {
-    info.param("H_SWASH_TYPE").is_some() && info.param("H_SW_TYPE").is_none()
+    info.param("H_SWASH_TYPE").is_some() && !info.params.keys().any(|k| k.starts_with("H_SW_"))
 }
 
 /// Warnings for a profile given with `--profile` on a vehicle whose parameters say how it
 /// drives its outputs: a swash servo whose range is not ArduPilot's fixed trim ± 500 µs reads
 /// its offsets and stuck positions scaled.
 pub fn given_profile_warnings(profile: &Profile, info: &VehicleInfo) -> Vec<String> {
-    if info.param("H_SW_TYPE").is_none() {
+    let ardupilot_heli = info.param("H_SW_TYPE").is_some() || info.param("H_SWASH_TYPE").is_some();
+    if !ardupilot_heli || pre_4_0_heli(info) {
         return Vec::new();
     }
     profile
@@ -460,6 +463,21 @@ mod tests {
         .unwrap();
         let s1 = &d.profile.actuators[0];
         assert_eq!((s1.pwm_min, s1.pwm_max), (1100.0, 1900.0));
+        // H_SWASH_TYPE with the swash library's H_SW_H3_* (3.6): trim ± 500 already.
+        let d = detect(&info(
+            MavType::MAV_TYPE_HELICOPTER,
+            &[
+                ("H_SWASH_TYPE", 0.0),
+                ("H_SW_H3_SV1_POS", -60.0),
+                ("SERVO1_FUNCTION", 33.0),
+                ("SERVO1_MIN", 1100.0),
+                ("SERVO1_TRIM", 1500.0),
+                ("SERVO1_MAX", 1900.0),
+            ],
+        ))
+        .unwrap();
+        let s1 = &d.profile.actuators[0];
+        assert_eq!((s1.pwm_min, s1.pwm_max), (1000.0, 2000.0));
         // A profile written with the clip limits, given to a 4.x heli: said once per servo.
         let mut p = Profile::resolve("heli-h3-120").unwrap();
         assert!(
