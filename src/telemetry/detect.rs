@@ -449,35 +449,29 @@ mod tests {
 
     #[test]
     fn swash_scaling_follows_the_firmware_and_a_given_profile_is_checked() {
-        // Before 4.0 (H_SWASH_TYPE): per side by SERVOn_MIN/TRIM/MAX.
-        let d = detect(&info(
-            MavType::MAV_TYPE_HELICOPTER,
-            &[
+        // Swash servo 1's range detected with these parameters besides its own.
+        let swash1_range = |extra: &[(&str, f32)]| {
+            let mut params = vec![
                 ("H_SWASH_TYPE", 0.0),
                 ("SERVO1_FUNCTION", 33.0),
                 ("SERVO1_MIN", 1100.0),
                 ("SERVO1_TRIM", 1500.0),
                 ("SERVO1_MAX", 1900.0),
-            ],
-        ))
-        .unwrap();
-        let s1 = &d.profile.actuators[0];
-        assert_eq!((s1.pwm_min, s1.pwm_max), (1100.0, 1900.0));
+            ];
+            params.extend_from_slice(extra);
+            let d = detect(&info(MavType::MAV_TYPE_HELICOPTER, &params)).unwrap();
+            (
+                d.profile.actuators[0].pwm_min,
+                d.profile.actuators[0].pwm_max,
+            )
+        };
+        // Before the swash library (H_SWASH_TYPE only): per side by SERVOn_MIN/TRIM/MAX.
+        assert_eq!(swash1_range(&[]), (1100.0, 1900.0));
         // H_SWASH_TYPE with the swash library's H_SW_H3_* (3.6): trim ± 500 already.
-        let d = detect(&info(
-            MavType::MAV_TYPE_HELICOPTER,
-            &[
-                ("H_SWASH_TYPE", 0.0),
-                ("H_SW_H3_SV1_POS", -60.0),
-                ("SERVO1_FUNCTION", 33.0),
-                ("SERVO1_MIN", 1100.0),
-                ("SERVO1_TRIM", 1500.0),
-                ("SERVO1_MAX", 1900.0),
-            ],
-        ))
-        .unwrap();
-        let s1 = &d.profile.actuators[0];
-        assert_eq!((s1.pwm_min, s1.pwm_max), (1000.0, 2000.0));
+        assert_eq!(
+            swash1_range(&[("H_SW_H3_SV1_POS", -60.0)]),
+            (1000.0, 2000.0)
+        );
         // A profile written with the clip limits, given to a 4.x heli: said once per servo.
         let mut p = Profile::resolve("heli-h3-120").unwrap();
         assert!(
