@@ -123,6 +123,11 @@ enum Command {
         /// MAVLink system id of the simulated vehicle.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=254))]
         sysid: u8,
+        /// Which autopilot the stream sounds like: ardupilot (SERVO_OUTPUT_RAW, RAW_IMU and the
+        /// frame parameters) or px4 (ACTUATOR_OUTPUT_STATUS and HIGHRES_IMU, no ArduPilot
+        /// parameters).
+        #[arg(long, value_enum, default_value_t = AutopilotArg::Ardupilot)]
+        autopilot: AutopilotArg,
     },
     /// Watch live vehicles on a MAVLink connection (e.g. udpin:0.0.0.0:14550 beside a ground
     /// station): both filters and the diagnosis per vehicle, decisions as they happen, a summary
@@ -352,6 +357,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             tlog,
             speed,
             sysid,
+            autopilot,
         } => {
             let named = scenario::resolve(&name)?;
             if out.is_some() || tlog.is_some() {
@@ -368,6 +374,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     speed,
                     sysid,
                     seed: seed.unwrap_or(named.scenario.seed),
+                    flavour: match autopilot {
+                        AutopilotArg::Ardupilot => ahcmon::telemetry::encode::Flavour::ArduPilot,
+                        AutopilotArg::Px4 => ahcmon::telemetry::encode::Flavour::Px4,
+                    },
                 };
                 return sim_mavlink(&named, opts);
             }
@@ -474,6 +484,7 @@ struct SimOutput {
     speed: Option<f64>,
     sysid: u8,
     seed: u64,
+    flavour: ahcmon::telemetry::encode::Flavour,
 }
 
 fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
@@ -540,6 +551,7 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
     let opts = FlyOptions {
         sysid: o.sysid,
         seed: o.seed,
+        flavour: o.flavour,
         speed: if live {
             Some(speed.unwrap_or(1.0))
         } else {
@@ -700,6 +712,7 @@ fn monitor(
                     let opts = ahcmon::link::simulate::FlyOptions {
                         sysid: 1,
                         seed: d.named.scenario.seed,
+                        flavour: Default::default(),
                         speed: Some(d.speed),
                         epoch_us: now_us(),
                     };
@@ -986,6 +999,13 @@ fn replay(
         replay_time.as_secs_f64()
     );
     write_error.map_or(Ok(()), Err)
+}
+
+/// `sim --autopilot`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum AutopilotArg {
+    Ardupilot,
+    Px4,
 }
 
 /// A mistake in how the command line combines things (exit code 2).

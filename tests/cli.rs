@@ -281,3 +281,56 @@ fn sim_without_files_prints_its_decisions() {
         "{out}"
     );
 }
+
+/// A PX4-sounding stream (ACTUATOR_OUTPUT_STATUS with `active` = the number of outputs,
+/// HIGHRES_IMU, no ArduPilot parameters) is estimated like the ArduPilot one: the same motor,
+/// class and onset.
+#[test]
+fn a_px4_stream_is_read_like_an_ardupilot_one() {
+    let dir = common::temp_dir("cli_px4");
+    let mut first = vec![];
+    for autopilot in ["ardupilot", "px4"] {
+        let tlog = dir.join(format!("{autopilot}.tlog"));
+        let decisions = dir.join(format!("{autopilot}.jsonl"));
+        let (code, _, err) = ahcmon(&[
+            "sim",
+            "--scenario",
+            "quad-x-motor2-loe-live",
+            "--autopilot",
+            autopilot,
+            "--tlog",
+            tlog.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let (code, out, err) = ahcmon(&[
+            "replay",
+            tlog.to_str().unwrap(),
+            "--headless",
+            "--decisions",
+            decisions.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert!(
+            out.contains("0 without an actuator's PWM"),
+            "{autopilot}: {out}"
+        );
+        assert!(out.contains("0 samples without a_z"), "{autopilot}: {out}");
+        let faults: Vec<serde_json::Value> = std::fs::read_to_string(&decisions)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .filter(|d: &serde_json::Value| d["event"] == "fault")
+            .collect();
+        // Motor 2 loses 30 % at t = 35 s of the flight, 45 s on the autopilot's clock.
+        let f = faults
+            .first()
+            .unwrap_or_else(|| panic!("{autopilot}: no fault"));
+        assert_eq!(f["actuator"], "motor2", "{autopilot}: {f}");
+        assert_eq!(f["class"], "loss_of_effectiveness", "{autopilot}: {f}");
+        let t = f["t"].as_f64().unwrap();
+        assert!((45.0..46.0).contains(&t), "{autopilot}: fault at {t}");
+        assert_eq!(faults.len(), 1, "{autopilot}: {faults:?}");
+        first.push(t);
+    }
+    assert_eq!(first[0], first[1]);
+}

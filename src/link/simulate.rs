@@ -43,6 +43,8 @@ pub fn script_on_vehicle_clock(scenario: &crate::scenario::Scenario) -> String {
 
 pub struct FlyOptions {
     pub sysid: u8,
+    /// Which autopilot the stream sounds like.
+    pub flavour: crate::telemetry::encode::Flavour,
     pub seed: u64,
     /// Multiple of real time; None = as fast as possible.
     pub speed: Option<f64>,
@@ -83,7 +85,7 @@ pub async fn fly(
     let vehicle = cfg.profile.clone();
     let (gyro, az_noise) = (cfg.gyro_noise, cfg.az_noise);
     let mut sim = VehicleSim::new(cfg).map_err(FlyError::Sim)?;
-    let mut enc = SimTelemetry::new(&vehicle);
+    let mut enc = SimTelemetry::with_flavour(&vehicle, opts.flavour);
     let l = vehicle.actuators.len();
     let mut report = FlyReport {
         vehicle: vehicle.name.clone(),

@@ -1,20 +1,32 @@
 //! The simulated vehicle speaking MAVLink like an ArduPilot autopilot: HEARTBEAT (its MAV_TYPE,
 //! armed), ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU at the sample rate, SYS_STATUS and
 //! GLOBAL_POSITION_INT at 1 Hz, and the frame parameters a GCS would read (FRAME_CLASS,
-//! FRAME_TYPE, H_SW_TYPE, SERVOn_FUNCTION) every 10 s. Pure: messages out, no I/O.
+//! FRAME_TYPE, H_SW_TYPE, SERVOn_FUNCTION) every 10 s. Or like PX4 ([`Flavour::Px4`]):
+//! ACTUATOR_OUTPUT_STATUS (`active` = the number of outputs, values in µs) and HIGHRES_IMU
+//! (m/s²) instead, and no ArduPilot parameters. Pure: messages out, no I/O.
 
 use super::{Profile, Role, VehicleKind};
 use crate::link::dialects::ahcmon::{
-    ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag,
-    MavParamType, MavState, MavSysStatusSensor, MavType, PARAM_VALUE_DATA, RAW_IMU_DATA,
-    SERVO_OUTPUT_RAW_DATA, SYS_STATUS_DATA,
+    ACTUATOR_OUTPUT_STATUS_DATA, ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA,
+    HIGHRES_IMU_DATA, MavAutopilot, MavMessage, MavModeFlag, MavParamType, MavState,
+    MavSysStatusSensor, MavType, PARAM_VALUE_DATA, RAW_IMU_DATA, SERVO_OUTPUT_RAW_DATA,
+    SYS_STATUS_DATA,
 };
 
 const G0: f64 = 9.80665;
 /// The simulated autopilot "booted" this long before the scenario starts (s).
 pub const BOOT_OFFSET_S: f64 = 10.0;
 
+/// Which autopilot the simulated vehicle sounds like.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Flavour {
+    #[default]
+    ArduPilot,
+    Px4,
+}
+
 pub struct SimTelemetry {
+    flavour: Flavour,
     profile: Profile,
     mav_type: MavType,
     params: Vec<(String, f32)>,
@@ -36,6 +48,10 @@ fn mav_type(profile: &Profile) -> MavType {
 
 impl SimTelemetry {
     pub fn new(profile: &Profile) -> Self {
+        Self::with_flavour(profile, Flavour::ArduPilot)
+    }
+
+    pub fn with_flavour(profile: &Profile, flavour: Flavour) -> Self {
         let mut params: Vec<(String, f32)> = vec![];
         match profile.vehicle {
             VehicleKind::Helicopter => {
@@ -78,7 +94,12 @@ impl SimTelemetry {
                 f32::from(u8::from(a.reversed)),
             ));
         }
+        if flavour == Flavour::Px4 {
+            // PX4's parameters are its own; a GCS reading them would not find these.
+            params.clear();
+        }
         Self {
+            flavour,
             profile: profile.clone(),
             mav_type: mav_type(profile),
             params,
@@ -106,7 +127,10 @@ impl SimTelemetry {
             out.push(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
                 custom_mode: 4, // GUIDED
                 mavtype: self.mav_type,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                autopilot: match self.flavour {
+                    Flavour::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    Flavour::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
+                },
                 base_mode: MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
                     | MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
                     | MavModeFlag::MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -163,6 +187,37 @@ impl SimTelemetry {
             if let (Some(p), Some(v)) = (pwm.get_mut(slot), u.get(j)) {
                 *p = self.profile.to_pwm(j, *v).round().clamp(0.0, 65535.0) as u16;
             }
+        }
+        if self.flavour == Flavour::Px4 {
+            // PX4: `active` is the number of outputs (actuator_outputs.noutputs).
+            let noutputs = self
+                .profile
+                .actuators
+                .iter()
+                .map(|a| usize::from(a.channel))
+                .max()
+                .unwrap_or(0)
+                .min(16);
+            let mut actuator = [0.0f32; 32];
+            for (v, p) in actuator.iter_mut().zip(&pwm).take(noutputs) {
+                *v = f32::from(*p);
+            }
+            out.push(MavMessage::ACTUATOR_OUTPUT_STATUS(
+                ACTUATOR_OUTPUT_STATUS_DATA {
+                    time_usec,
+                    active: noutputs as u32,
+                    actuator,
+                },
+            ));
+            out.push(MavMessage::HIGHRES_IMU(HIGHRES_IMU_DATA {
+                time_usec,
+                zacc: az as f32,
+                xgyro: rates[0] as f32,
+                ygyro: rates[1] as f32,
+                zgyro: rates[2] as f32,
+                ..Default::default()
+            }));
+            return;
         }
         out.push(MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
             // u32 µs since boot: wraps every 71.6 min, as on the real thing.
