@@ -488,15 +488,11 @@ impl VehicleAssembler {
                 return None;
             }
             self.az_interval = own_interval;
-        } else {
-            if let Some(prev) = self.az
-                && t <= prev.t
-            {
+        } else if let Some(prev) = self.az {
+            if t <= prev.t {
                 return None;
             }
-            if let Some(prev) = self.az {
-                self.az_interval = Some(t - prev.t);
-            }
+            self.az_interval = Some(t - prev.t);
         }
         self.az_source = Some(source);
         self.az = Some(Stamped { t, v: az });
