@@ -1035,10 +1035,10 @@ impl Diagnoser {
             }
             // Classification needs the command to have moved enough to separate gamma and delta.
             let excited = !low;
-            let class = if excited || self.data_class(j).is_some() {
+            let (class, mixed) = if excited || self.data_class(j).is_some() {
                 self.classify(j)
             } else {
-                FaultClass::Unclassified
+                (FaultClass::Unclassified, false)
             };
             let st = &self.actuators[j];
             match (st.active, class) {
@@ -1075,8 +1075,11 @@ impl Diagnoser {
                     // A class once found stays until the excitation allows another, and a new
                     // one must hold for a while. The class is read from the MIT-UKF: while it
                     // warms up after a reset, its estimates say nothing about the class.
+                    // Nor does a mixed reading (gain and offset both off) overturn it: its class
+                    // is only the sign of the output's net change, which crosses zero as the
+                    // two trade (the demo's tail bias read bias, loss, bias within 4 s).
                     let ukf_warming = t < self.actuators[j].channels[0].hold_until;
-                    let mut c = if c == FaultClass::Unclassified || ukf_warming {
+                    let mut c = if c == FaultClass::Unclassified || ukf_warming || mixed {
                         prev
                     } else {
                         c
@@ -1213,7 +1216,9 @@ impl Diagnoser {
         se > 0.0 && slope.abs() / se > 30.0 && span > self.params.bias_tau
     }
 
-    fn classify(&self, j: usize) -> FaultClass {
+    /// The class of actuator `j`'s fault, and whether it was read from a mixed estimate (gain
+    /// and offset both beyond their tolerances), where it is only a tie-break.
+    fn classify(&self, j: usize) -> (FaultClass, bool) {
         let p = &self.params;
         let st = &self.actuators[j];
         let e = st.channels[0].last;
@@ -1221,29 +1226,30 @@ impl Diagnoser {
         // controller that follows it, a ramp fits a stuck output too); then the data's kind,
         // then the MIT-UKF's estimates.
         if self.drifting(j) {
-            return FaultClass::Drift;
+            return (FaultClass::Drift, false);
         }
         if let Some(c) = self.data_class(j) {
-            return c;
+            return (c, false);
         }
         let gamma_contains_one = e.gamma_lo <= 1.0 && 1.0 <= e.gamma_hi;
         if e.gamma.abs() < p.stuck_gamma && !gamma_contains_one {
-            return FaultClass::Stuck;
+            return (FaultClass::Stuck, false);
         }
         if e.gamma < 1.0 - p.loe_tau
             && e.delta.abs() < p.bias_tau.max(0.5 * (1.0 - e.gamma) * st.u.mean.abs())
         {
-            return FaultClass::LossOfEffectiveness;
+            return (FaultClass::LossOfEffectiveness, false);
         }
         if e.delta.abs() > p.bias_tau && (e.gamma - 1.0).abs() < p.loe_tau {
-            return FaultClass::Bias;
+            return (FaultClass::Bias, false);
         }
         // Mixed: say what the output lost at the operating point.
-        if st.channels[0].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
+        let class = if st.channels[0].e * st.u.mean.signum() < 0.0 && e.gamma < 1.0 {
             FaultClass::LossOfEffectiveness
         } else {
             FaultClass::Bias
-        }
+        };
+        (class, true)
     }
 
     fn decision(
@@ -1760,6 +1766,66 @@ mod tests {
         lower.diagnosis.gain_threshold = Some(0.085);
         let (_, _, decided) = run(&lower, &smaller, 0.05);
         assert_eq!(decided.len(), 1, "{decided:?}");
+    }
+
+    #[test]
+    fn a_mixed_reading_does_not_overturn_a_decided_class() {
+        // H3-120 tail, command 0.6 ± 0.2: an offset of +0.15 is decided as a bias. Then both
+        // filters read gain 0.73 with offset +0.13 (both off: the output's net change at the
+        // command, -0.03, only says which way they trade): the bias stays. A clear loss
+        // (gain 0.6, no offset) still changes the class after CLASS_HOLD_S.
+        let p = Profile::resolve("heli-h3-120").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let healthy = healthy_estimate(0.02);
+        let with_tail = |gamma: f64, delta: f64| {
+            let mut e = [healthy; 4];
+            e[3] = AhcEstimate {
+                gamma,
+                gamma_lo: gamma - 0.05,
+                gamma_hi: gamma + 0.05,
+                delta,
+                delta_lo: delta - 0.03,
+                delta_hi: delta + 0.03,
+                ..Default::default()
+            };
+            e
+        };
+        let (bias, mixed, loss) = (
+            with_tail(1.0, 0.15),
+            with_tail(0.73, 0.13),
+            with_tail(0.6, 0.0),
+        );
+        let mut out = vec![];
+        let mut classes = vec![];
+        for k in 0..1200 {
+            let t = k as f64 * 0.02;
+            let est = match t {
+                t if t < 5.0 => &[healthy; 4],
+                t if t < 10.0 => &bias,
+                t if t < 18.0 => &mixed,
+                _ => &loss,
+            };
+            let u = [0.0, 0.0, 0.0, 0.6 + 0.2 * (t * 4.0).sin()];
+            d.update(t, &u, &[est, est], &mut out);
+            classes.extend(
+                out.drain(..)
+                    .filter(|x| x.actuator.as_deref() == Some("tail") && x.class.is_some())
+                    .map(|x| (x.t, x.class.unwrap())),
+            );
+        }
+        let (first_t, first) = classes[0];
+        assert!(first == FaultClass::Bias && first_t < 10.0, "{classes:?}");
+        assert!(
+            classes
+                .iter()
+                .all(|&(t, c)| t >= 18.0 || c == FaultClass::Bias),
+            "{classes:?}"
+        );
+        let last = classes.last().unwrap();
+        assert!(
+            last.1 == FaultClass::LossOfEffectiveness && last.0 >= 18.0 + CLASS_HOLD_S,
+            "{classes:?}"
+        );
     }
 
     #[test]
