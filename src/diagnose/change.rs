@@ -56,6 +56,15 @@ pub struct Reading {
     pub mixed_drop: f64,
     /// The best drop of any change of another actuator.
     pub next_actuator_drop: f64,
+    /// The best drop of an offset of the same actuator growing linearly from zero since its
+    /// start (a drift), its rate (normalised command units per second) and stretch (samples).
+    /// Kept out of the choice of actuator and kind, which the step changes make: it only tells
+    /// a drift from the step it would otherwise be read as.
+    pub ramp_drop: f64,
+    pub ramp_rate: f64,
+    pub ramp_samples: usize,
+    /// Time of the ramp's first sample.
+    pub ramp_since: f64,
 }
 
 impl Reading {
@@ -178,7 +187,14 @@ impl ChangeTest {
         // Per actuator and kind: (drop, samples, θ, residual variance).
         let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         let mut mixed = [0.0f64; MAX_ACTUATORS];
+        // Per actuator: the best ramp (drop, samples, rate).
+        let mut ramp = [(0.0f64, 0usize, 0.0f64); MAX_ACTUATORS];
+        let t_newest = self.buf[(self.head + cap - 1) % cap].t;
         for (j, b) in self.effects.iter().enumerate() {
+            // A ramp since τ, s_k = θ (t_k - t_τ): its sums from Σ q, Σ q t, Σ t, Σ t² (q the
+            // sample's Σ b r; times from the newest sample, so they stay small).
+            let bb: f64 = b.iter().take(self.rows).map(|x| x * x).sum();
+            let (mut q0, mut q1, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0);
             // Sums over the changed stretch, extended one sample back per iteration.
             let (mut base, mut gy, mut gx, mut oy, mut ox, mut bbu) =
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
@@ -195,8 +211,27 @@ impl ChangeTest {
                     ox += bi * bi;
                     bbu += bi * bi * u;
                 }
+                let tk = e.t - t_newest;
+                let q: f64 = b
+                    .iter()
+                    .zip(&e.r)
+                    .take(self.rows)
+                    .map(|(bi, ri)| bi * ri)
+                    .sum();
+                q0 += q;
+                q1 += q * tk;
+                t1 += tk;
+                t2 += tk * tk;
                 if n < self.min_samples {
                     continue;
+                }
+                let num = q1 - tk * q0;
+                let den = bb * (t2 - 2.0 * tk * t1 + n as f64 * tk * tk);
+                if den > 0.0 {
+                    let drop = num * num / den;
+                    if drop.is_finite() && drop > ramp[j].0 {
+                        ramp[j] = (drop, n, num / den);
+                    }
                 }
                 let rows = (n * self.rows) as f64;
                 let mut consider = |k: usize, drop: f64, theta: f64| {
@@ -292,6 +327,10 @@ impl ChangeTest {
             next_kind_drop,
             next_actuator_drop,
             mixed_drop: mixed[j],
+            ramp_drop: ramp[j].0,
+            ramp_rate: ramp[j].2,
+            ramp_samples: ramp[j].1,
+            ramp_since: self.buf[(self.head + cap - ramp[j].1.max(1)) % cap].t,
         })
     }
 }
@@ -359,6 +398,46 @@ mod tests {
     }
 
     #[test]
+    fn a_drift_fits_a_ramp_clearly_and_a_step_does_not() {
+        // Actuator 1's offset grows 0.05 a second from step 200 (4 s): at 7 s the ramp fits
+        // clearly better than any step, with its rate and start (noise 0.02 a row: the rate's
+        // standard error over 3 s is about 0.002). An offset step of the same
+        // size at the end (-0.15 from 4 s) fits the step best, the ramp clearly worse.
+        let b = effects();
+        let drifting = |ramp: bool| {
+            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10);
+            let mut rng = Rng::new(11);
+            for k in 0..350 {
+                let t = k as f64 * 0.02;
+                let u: Vec<f64> = (0..3)
+                    .map(|i| 0.5 + 0.1 * (t * (1.3 + i as f64)).sin())
+                    .collect();
+                let s = match (k >= 200, ramp) {
+                    (false, _) => 0.0,
+                    (true, true) => 0.05 * (t - 4.0),
+                    (true, false) => 0.15,
+                };
+                let mut r = [0.0; 4];
+                for i in 0..3 {
+                    r[i] = b[1][i] * s + 0.02 * rng.normal();
+                }
+                test.push(t, &r, &u);
+            }
+            test.evaluate().unwrap()
+        };
+        let r = drifting(true);
+        assert_eq!(r.actuator, 1, "{r:?}");
+        assert!(-r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
+        assert!((r.ramp_rate - 0.05).abs() < 0.005, "{r:?}");
+        assert!((r.ramp_samples as f64 * 0.02 - 3.0).abs() < 0.2, "{r:?}");
+        assert!((r.ramp_since - 4.0).abs() < 0.2, "{r:?}");
+        assert!(r.ramp_drop >= r.mixed_drop, "{r:?}");
+        let r = drifting(false);
+        assert_eq!((r.actuator, r.kind), (1, ChangeKind::Offset), "{r:?}");
+        assert!(r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
+    }
+
+    #[test]
     fn the_ring_keeps_the_latest_samples_and_a_change_older_than_it_starts_at_its_oldest() {
         // Capacity 400: after 600 steps with the change at 450 the onset is still found; with
         // the change at 100 the whole stored stretch is the changed one.
@@ -417,6 +496,10 @@ mod tests {
             next_kind_drop: 100.0,
             next_actuator_drop: 0.0,
             mixed_drop: 0.0,
+            ramp_drop: 0.0,
+            ramp_rate: 0.0,
+            ramp_samples: 0,
+            ramp_since: 0.0,
         };
         assert!((r.margin_over(r.next_kind_drop) - 20.0).abs() < 1e-9);
         let coloured = Reading {
