@@ -444,6 +444,12 @@ impl Diagnoser {
         if self.data_drift(&r) {
             return Some(FaultClass::Drift);
         }
+        self.step_class(j)
+    }
+
+    /// [`Self::data_class`] among the step changes only (gain, offset, stuck).
+    fn step_class(&self, j: usize) -> Option<FaultClass> {
+        let r = self.reading.filter(|r| r.actuator == j)?;
         let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
         if !long || r.margin_over(r.next_kind_drop) < DATA_MARGIN {
             return None;
@@ -472,9 +478,12 @@ impl Diagnoser {
     /// clearly better than the step of the reading's kind and at least as well as a gain and
     /// an offset stepping together, and has grown beyond the bias tolerance over at least
     /// `CLASS_MIN_S`.
+    /// Angle outputs only, as for an offset: a hovering motor's gain and offset differ only
+    /// through its command's few per cent of variation.
     fn data_drift(&self, r: &Reading) -> bool {
         let span = r.ramp_samples as f64 * self.dt;
-        span >= CLASS_MIN_S
+        self.is_angle[r.actuator]
+            && span >= CLASS_MIN_S
             && (r.ramp_rate * span).abs() > self.params.bias_tau
             && r.ramp_drop >= r.mixed_drop
             && -r.margin_over(r.ramp_drop) >= DATA_MARGIN
@@ -903,7 +912,8 @@ impl Diagnoser {
         // over the whole store may be the model's standing mismatch.)
         let before = (1.0 / self.dt).round() as usize;
         let confirmed = self.reading.map(|r| r.actuator).filter(|&j| {
-            self.data_class(j).is_some()
+            // (A step's class: a drift's margin is taken over the step fit's stretch.)
+            self.step_class(j).is_some()
                 && self.naming_reading().is_some_and(|r| {
                     r.samples + before <= self.change.len() && self.beyond_thresholds(&r)
                 })
@@ -1091,11 +1101,14 @@ impl Diagnoser {
                     // A class once found stays until the excitation allows another, and a new
                     // one must hold for a while. The class is read from the MIT-UKF: while it
                     // warms up after a reset, its estimates say nothing about the class.
-                    // Nor does a mixed reading (gain and offset both off) overturn it: its class
-                    // is only the sign of the output's net change, which crosses zero as the
-                    // two trade (the demo's tail bias read bias, loss, bias within 4 s).
+                    // Nor does a mixed reading (no single-kind rule applies, typically gain and
+                    // offset both off) overturn a class found: its class is only the sign of the
+                    // output's net change, which crosses zero as the two trade (the demo's tail
+                    // bias read bias, loss, bias within 4 s). It does give one to a fault that
+                    // had none.
                     let ukf_warming = t < self.actuators[j].channels[0].hold_until;
-                    let mut c = if c == FaultClass::Unclassified || ukf_warming || mixed {
+                    let held = mixed && prev != FaultClass::Unclassified;
+                    let mut c = if c == FaultClass::Unclassified || ukf_warming || held {
                         prev
                     } else {
                         c
@@ -1207,10 +1220,9 @@ impl Diagnoser {
             .collect()
     }
 
-    /// Whether the MIT-UKF's delta has moved steadily over the last 3 s (t-test on the slope
-    /// of its regression on time, and a span over the bias tolerance).
-    /// The class of actuator `j`'s fault, and whether it was read from a mixed estimate (gain
-    /// and offset both beyond their tolerances), where it is only a tie-break.
+    /// The class of actuator `j`'s fault, and whether it was read from the fallback where no
+    /// single-kind rule applies (typically gain and offset both beyond their tolerances), where
+    /// it is only a tie-break.
     fn classify(&self, j: usize) -> (FaultClass, bool) {
         let p = &self.params;
         let st = &self.actuators[j];
@@ -1814,6 +1826,33 @@ mod tests {
         let last = classes.last().unwrap();
         assert!(
             last.1 == FaultClass::LossOfEffectiveness && last.0 >= 18.0 + CLASS_HOLD_S,
+            "{classes:?}"
+        );
+        // A fault decided while the command stood still has no class: a mixed reading, once
+        // the command moves, gives it one (gain 0.5 with offset +0.2: a net loss of 0.1 at 0.6).
+        let halved_and_raised = with_tail(0.5, 0.2);
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let mut classes: Vec<(f64, FaultClass)> = vec![];
+        for k in 0..1000 {
+            let t = k as f64 * 0.02;
+            let est = if t < 5.0 {
+                &[healthy; 4]
+            } else {
+                &halved_and_raised
+            };
+            let moving = if t < 12.0 { 0.0 } else { 0.2 };
+            let u = [0.0, 0.0, 0.0, 0.6 + moving * (t * 4.0).sin()];
+            d.update(t, &u, &[est, est], &mut out);
+            classes.extend(
+                out.drain(..)
+                    .filter(|x| x.actuator.as_deref() == Some("tail") && x.class.is_some())
+                    .map(|x| (x.t, x.class.unwrap())),
+            );
+        }
+        assert_eq!(classes[0].1, FaultClass::Unclassified, "{classes:?}");
+        assert_eq!(
+            classes.last().unwrap().1,
+            FaultClass::LossOfEffectiveness,
             "{classes:?}"
         );
     }
