@@ -487,3 +487,49 @@ fn in_flight_calibration_is_not_fooled_by_gusts() {
     assert!(scale_err < 0.03, "mean factor error {scale_err}");
     assert!(damping_err < 0.05, "mean damping error {damping_err}");
 }
+
+/// A drifting offset is read as a drift while it grows, and step faults are not: the heli tail
+/// offset ramped 0 → 0.3 over 30 s from 15 s (the tail bias scenario's flight, 60 s; a real
+/// file), seeds 1-3, has drift as the class in force for most of the ramp after its first
+/// decision (measured 70-79 %); the tail bias and aileron bias step faults of the same seeds
+/// have no drift decision at all. (Before the change test's ramp, the drift share was 7-9 %.)
+#[test]
+fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
+    use ahcmon::diagnose::vehicle::{Event, FaultClass};
+    let base = std::fs::read_to_string("replay/scenarios/heli-tail-bias.toml").unwrap();
+    let flight = &base[..base.find("[[fault]]").unwrap()];
+    let ramp = flight.replace("duration_s = 40.0", "duration_s = 60.0")
+        + "[[fault]]\nactuator = \"tail\"\nt = 15.0\nramp = { duration_s = 30.0, delta = 0.3 }\n";
+    let dir = common::temp_dir("drift");
+    let path = dir.join("heli-tail-drift.toml");
+    std::fs::write(&path, ramp).unwrap();
+    for seed in 1..=3 {
+        let all = decisions(path.to_str().unwrap(), seed);
+        let classed: Vec<_> = all
+            .iter()
+            .filter(|d| matches!(d.event, Event::Fault | Event::Changed | Event::Cleared))
+            .collect();
+        let first = classed.first().expect("decided").t;
+        let mut drift_s = 0.0;
+        for (i, d) in classed.iter().enumerate() {
+            let end = classed.get(i + 1).map_or(60.0, |n| n.t).min(45.0);
+            if d.event != Event::Cleared && d.class == Some(FaultClass::Drift) {
+                drift_s += (end - d.t).max(0.0);
+            }
+        }
+        let share = drift_s / (45.0 - first);
+        assert!(
+            share >= 0.5,
+            "seed {seed}: drift {share:.2} of the ramp: {classed:?}"
+        );
+    }
+    for name in ["heli-tail-bias", "plane-aileron-bias"] {
+        for seed in 1..=3 {
+            let all = decisions(name, seed);
+            assert!(
+                all.iter().all(|d| d.class != Some(FaultClass::Drift)),
+                "{name} seed {seed}: {all:?}"
+            );
+        }
+    }
+}

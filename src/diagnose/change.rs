@@ -57,7 +57,8 @@ pub struct Reading {
     /// The best drop of any change of another actuator.
     pub next_actuator_drop: f64,
     /// The best drop of an offset of the same actuator growing linearly from zero since its
-    /// start (a drift), its rate (normalised command units per second) and stretch (samples).
+    /// start, or over the whole store from a value already there (a drift), its rate
+    /// (normalised command units per second) and stretch (samples).
     /// Kept out of the choice of actuator and kind, which the step changes make: it only tells
     /// a drift from the step it would otherwise be read as.
     pub ramp_drop: f64,
@@ -260,6 +261,18 @@ impl ChangeTest {
                     consider(2, sy * sy / ox - 2.0 * gy - gx, sy / ox);
                 }
             }
+            // Over the whole store, a drift that began before it: an offset already there and
+            // growing (times centred on their mean, so the two are fitted independently). Its
+            // drop includes the offset's, so only a clear slope makes it beat the offset.
+            let n = self.len as f64;
+            let stt = t2 - t1 * t1 / n;
+            if self.len >= self.min_samples && bb > 0.0 && stt > 0.0 {
+                let slope = q1 - q0 * t1 / n;
+                let drop = q0 * q0 / (n * bb) + slope * slope / (bb * stt);
+                if drop.is_finite() && drop > ramp[j].0 {
+                    ramp[j] = (drop, self.len, slope / (bb * stt));
+                }
+            }
         }
         let kinds = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
         let mut top: Option<(usize, usize)> = None;
@@ -435,6 +448,44 @@ mod tests {
         let r = drifting(false);
         assert_eq!((r.actuator, r.kind), (1, ChangeKind::Offset), "{r:?}");
         assert!(r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
+    }
+
+    #[test]
+    fn a_drift_older_than_the_store_still_fits_a_ramp_and_an_old_offset_does_not() {
+        // Store of 150 samples (3 s). Actuator 1's offset has grown 0.05 a second since 1 s;
+        // at 7 s the store holds only the ramp's last 3 s, which start at +0.15: the ramp over
+        // the whole store (offset and slope) fits clearly better than any step. An offset of
+        // +0.3 since 1 s fits no slope: not a drift.
+        let b = effects();
+        let evaluate = |ramp: bool| {
+            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 150, 10);
+            let mut rng = Rng::new(5);
+            for k in 0..350 {
+                let t = k as f64 * 0.02;
+                let u: Vec<f64> = (0..3)
+                    .map(|i| 0.5 + 0.1 * (t * (1.3 + i as f64)).sin())
+                    .collect();
+                let s = match (t >= 1.0, ramp) {
+                    (false, _) => 0.0,
+                    (true, true) => 0.05 * (t - 1.0),
+                    (true, false) => 0.3,
+                };
+                let mut r = [0.0; 4];
+                for i in 0..3 {
+                    r[i] = b[1][i] * s + 0.02 * rng.normal();
+                }
+                test.push(t, &r, &u);
+            }
+            test.evaluate().unwrap()
+        };
+        let r = evaluate(true);
+        assert_eq!(r.actuator, 1, "{r:?}");
+        assert_eq!(r.ramp_samples, 150, "{r:?}");
+        assert!((r.ramp_rate - 0.05).abs() < 0.01, "{r:?}");
+        assert!(-r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
+        let r = evaluate(false);
+        assert_eq!((r.actuator, r.kind), (1, ChangeKind::Offset), "{r:?}");
+        assert!(-r.margin_over(r.ramp_drop) < 20.0, "{r:?}");
     }
 
     #[test]
