@@ -410,42 +410,41 @@ mod tests {
         }
     }
 
+    /// The reading after 7 s (350 steps) in which actuator 1's offset is `offset(t)`, with
+    /// noise 0.02 a row and a store of `capacity` samples.
+    fn offset_change(capacity: usize, seed: u64, offset: impl Fn(f64) -> f64) -> Reading {
+        let b = effects();
+        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, capacity, 10);
+        let mut rng = Rng::new(seed);
+        for k in 0..350 {
+            let t = k as f64 * 0.02;
+            let u: Vec<f64> = (0..3)
+                .map(|i| 0.5 + 0.1 * (t * (1.3 + i as f64)).sin())
+                .collect();
+            let s = offset(t);
+            let mut r = [0.0; 4];
+            for i in 0..3 {
+                r[i] = b[1][i] * s + 0.02 * rng.normal();
+            }
+            test.push(t, &r, &u);
+        }
+        test.evaluate().unwrap()
+    }
+
     #[test]
     fn a_drift_fits_a_ramp_clearly_and_a_step_does_not() {
-        // Actuator 1's offset grows 0.05 a second from step 200 (4 s): at 7 s the ramp fits
-        // clearly better than any step, with its rate and start (noise 0.02 a row: the rate's
-        // standard error over 3 s is about 0.002). An offset step of the same
-        // size at the end (-0.15 from 4 s) fits the step best, the ramp clearly worse.
-        let b = effects();
-        let drifting = |ramp: bool| {
-            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10);
-            let mut rng = Rng::new(11);
-            for k in 0..350 {
-                let t = k as f64 * 0.02;
-                let u: Vec<f64> = (0..3)
-                    .map(|i| 0.5 + 0.1 * (t * (1.3 + i as f64)).sin())
-                    .collect();
-                let s = match (k >= 200, ramp) {
-                    (false, _) => 0.0,
-                    (true, true) => 0.05 * (t - 4.0),
-                    (true, false) => 0.15,
-                };
-                let mut r = [0.0; 4];
-                for i in 0..3 {
-                    r[i] = b[1][i] * s + 0.02 * rng.normal();
-                }
-                test.push(t, &r, &u);
-            }
-            test.evaluate().unwrap()
-        };
-        let r = drifting(true);
+        // Actuator 1's offset grows 0.05 a second from 4 s: at 7 s the ramp fits clearly
+        // better than any step, with its rate and start (noise 0.02 a row: the rate's standard
+        // error over 3 s is about 0.002). An offset step of the size the ramp reaches (+0.15
+        // from 4 s) fits the step best, the ramp clearly worse.
+        let r = offset_change(400, 11, |t| if t >= 4.0 { 0.05 * (t - 4.0) } else { 0.0 });
         assert_eq!(r.actuator, 1, "{r:?}");
         assert!(-r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
         assert!((r.ramp_rate - 0.05).abs() < 0.005, "{r:?}");
         assert!((r.ramp_samples as f64 * 0.02 - 3.0).abs() < 0.2, "{r:?}");
         assert!((r.ramp_since - 4.0).abs() < 0.2, "{r:?}");
         assert!(r.ramp_drop >= r.mixed_drop, "{r:?}");
-        let r = drifting(false);
+        let r = offset_change(400, 11, |t| if t >= 4.0 { 0.15 } else { 0.0 });
         assert_eq!((r.actuator, r.kind), (1, ChangeKind::Offset), "{r:?}");
         assert!(r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
     }
@@ -456,34 +455,12 @@ mod tests {
         // at 7 s the store holds only the ramp's last 3 s, which start at +0.15: the ramp over
         // the whole store (offset and slope) fits clearly better than any step. An offset of
         // +0.3 since 1 s fits no slope: not a drift.
-        let b = effects();
-        let evaluate = |ramp: bool| {
-            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 150, 10);
-            let mut rng = Rng::new(5);
-            for k in 0..350 {
-                let t = k as f64 * 0.02;
-                let u: Vec<f64> = (0..3)
-                    .map(|i| 0.5 + 0.1 * (t * (1.3 + i as f64)).sin())
-                    .collect();
-                let s = match (t >= 1.0, ramp) {
-                    (false, _) => 0.0,
-                    (true, true) => 0.05 * (t - 1.0),
-                    (true, false) => 0.3,
-                };
-                let mut r = [0.0; 4];
-                for i in 0..3 {
-                    r[i] = b[1][i] * s + 0.02 * rng.normal();
-                }
-                test.push(t, &r, &u);
-            }
-            test.evaluate().unwrap()
-        };
-        let r = evaluate(true);
+        let r = offset_change(150, 5, |t| if t >= 1.0 { 0.05 * (t - 1.0) } else { 0.0 });
         assert_eq!(r.actuator, 1, "{r:?}");
         assert_eq!(r.ramp_samples, 150, "{r:?}");
         assert!((r.ramp_rate - 0.05).abs() < 0.01, "{r:?}");
         assert!(-r.margin_over(r.ramp_drop) > 20.0, "{r:?}");
-        let r = evaluate(false);
+        let r = offset_change(150, 5, |t| if t >= 1.0 { 0.3 } else { 0.0 });
         assert_eq!((r.actuator, r.kind), (1, ChangeKind::Offset), "{r:?}");
         assert!(-r.margin_over(r.ramp_drop) < 20.0, "{r:?}");
     }
