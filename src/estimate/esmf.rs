@@ -8,7 +8,8 @@
 //! of estimators.md §3.5 (see [`EsmfParams`]).
 
 use super::linalg::{
-    SparseRows, cholesky_jitter, identity_tail_start, sandwich_walk, sym_top_eigen, symmetrize,
+    SparseRows, cholesky_jitter, identity_tail_start, mirror_upper, sandwich_walk, sym_top_eigen,
+    symmetrize,
 };
 use super::{Estimator, EstimatorError, check_inputs};
 use crate::model::{BilinearTerm, Model};
@@ -364,6 +365,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
     /// directions the data do not see (gain against bias in a steady hover) from growing
     /// without end under the Minkowski prediction.
     pub fn intersect_box(&mut self) {
+        // Between cuts only the upper triangle of P is kept current (mirrored once at the end).
+        let mut cut = false;
         for i in 0..N {
             let r = self.box_half[i];
             let pii = self.p[(i, i)];
@@ -374,21 +377,28 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             // Choose rho on a grid: the smallest trace of the result (the weight also inflates
             // every other direction by 1/(1-rho), so P_ii alone is the wrong measure).
             let trace = self.p.trace();
-            let col_sq = self.p.column(i).norm_squared();
-            let mut best: Option<(usize, f64)> = None;
-            for (k, (inv_rho, inv_1mr)) in BOX_RHO_GRID.iter().enumerate() {
-                let w = pii * inv_1mr + r * r * inv_rho;
-                let inv_w = 1.0 / w;
-                let delta = 1.0 - e * e * inv_w;
-                if delta <= 0.0 {
-                    continue;
-                }
-                let size = delta * inv_1mr * (trace - col_sq * inv_1mr * inv_w);
-                if best.is_none_or(|(_, s)| size < s) {
-                    best = Some((k, size));
+            // Column i of P from the upper triangle.
+            let v = SVector::<f64, N>::from_fn(|r, _| self.p[(r.min(i), r.max(i))]);
+            let col_sq = v.norm_squared();
+            // Every grid point's size first (no branches: the divisions pipeline), then the
+            // first smallest among the consistent ones (δ > 0).
+            let (r2, e2) = (r * r, e * e);
+            let mut sizes = [f64::INFINITY; BOX_RHO_GRID.len()];
+            for (size, (inv_rho, inv_1mr)) in sizes.iter_mut().zip(BOX_RHO_GRID.iter()) {
+                let inv_w = 1.0 / (pii * inv_1mr + r2 * inv_rho);
+                let delta = 1.0 - e2 * inv_w;
+                let s = delta * inv_1mr * (trace - col_sq * inv_1mr * inv_w);
+                *size = if delta > 0.0 { s } else { f64::INFINITY };
+            }
+            let (mut k, mut best) = (usize::MAX, f64::INFINITY);
+            for (j, &size) in sizes.iter().enumerate() {
+                if size < best {
+                    (k, best) = (j, size);
                 }
             }
-            let Some((k, _)) = best else { continue };
+            if k == usize::MAX {
+                continue;
+            }
             let (inv_rho, inv_1mr) = BOX_RHO_GRID[k];
             // With Π = P/(1-ρ) and w = Π_ii + r²/ρ the update is
             // δ (Π - Π_i Π_iᵀ / w) = δ/(1-ρ) · (P - P_i P_iᵀ / ((1-ρ) w)): one symmetric rank-1
@@ -397,20 +407,23 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             let delta = 1.0 - e * e / w;
             let alpha = inv_1mr / w;
             let scale = delta * inv_1mr;
-            let v: SVector<f64, N> = self.p.column(i).into_owned();
             let new_pii = scale * (pii - alpha * pii * pii);
             if !(alpha.is_finite() && scale.is_finite() && new_pii > 0.0) {
                 continue;
             }
-            for c in 0..N {
-                for rr in 0..=c {
-                    let value = scale * (self.p[(rr, c)] - alpha * v[rr] * v[c]);
-                    self.p[(rr, c)] = value;
-                    self.p[(c, rr)] = value;
+            // Upper triangle column by column (contiguous).
+            let av = v * alpha;
+            for (c, col) in self.p.as_mut_slice().chunks_exact_mut(N).enumerate() {
+                for (x, a) in col[..=c].iter_mut().zip(av.iter()) {
+                    *x = scale * (*x - a * v[c]);
                 }
             }
+            cut = true;
             self.x += v * (alpha * e);
             self.box_cuts += 1;
+        }
+        if cut {
+            mirror_upper(&mut self.p);
         }
     }
 

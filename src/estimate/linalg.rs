@@ -14,6 +14,15 @@ pub fn symmetrize<const N: usize>(p: &mut SMatrix<f64, N, N>) {
     }
 }
 
+/// Copy the upper triangle onto the lower one.
+pub fn mirror_upper<const N: usize>(p: &mut SMatrix<f64, N, N>) {
+    for c in 0..N {
+        for r in (c + 1)..N {
+            p[(r, c)] = p[(c, r)];
+        }
+    }
+}
+
 /// Cholesky factorisation; on failure retry with `P + eps * max(diag P) * I` for
 /// eps = 1e-12, 1e-10, 1e-8, then give up with a typed error.
 pub fn cholesky_jitter<const N: usize>(
@@ -119,14 +128,26 @@ pub fn identity_tail_start<const N: usize>(a: &SMatrix<f64, N, N>) -> usize {
 /// and `A₁ X A₁ᵀ` in the corner: about `k N²` products instead of `2 N³`. Every caller passes
 /// a symmetric matrix (a shape, a covariance or a derivative of one); the result is exactly
 /// symmetric.
-#[allow(clippy::needless_range_loop)] // index loops mirror the block formulas
 pub fn sandwich_walk<const N: usize>(
     a: &SMatrix<f64, N, N>,
     x: &SMatrix<f64, N, N>,
     k: usize,
 ) -> SMatrix<f64, N, N> {
+    let mut out = *x;
+    sandwich_walk_in_place(a, &mut out, k);
+    out
+}
+
+/// [`sandwich_walk`] overwriting `x` (no copies of the N×N matrix).
+#[allow(clippy::needless_range_loop)] // index loops mirror the block formulas
+pub fn sandwich_walk_in_place<const N: usize>(
+    a: &SMatrix<f64, N, N>,
+    x: &mut SMatrix<f64, N, N>,
+    k: usize,
+) {
     if N <= SMALL_N || k > WALK_MAX_ROWS {
-        return a * x * a.transpose();
+        *x = a * *x * a.transpose();
+        return;
     }
     // The mixing rows of A, as columns (contiguous for the dot products).
     let mut rows = [SVector::<f64, N>::zeros(); WALK_MAX_ROWS];
@@ -136,25 +157,25 @@ pub fn sandwich_walk<const N: usize>(
     // T = A₁ X, row r of it as column r of `t`: (A₁ X)ᵀ = X A₁ᵀ (X symmetric), a sum of X's
     // columns (contiguous axpys, no horizontal sums).
     let mut t = [SVector::<f64, N>::zeros(); WALK_MAX_ROWS];
-    for c in 0..N {
-        let xc = x.column(c);
+    for (c, xc) in x.as_slice().chunks_exact(N).enumerate() {
         for r in 0..k {
-            t[r].axpy(rows[r][c], &xc, 1.0);
+            let coeff = rows[r][c];
+            for (tj, xj) in t[r].iter_mut().zip(xc) {
+                *tj += coeff * xj;
+            }
         }
     }
-    let mut out = *x;
     for r in 0..k {
         for c in k..N {
-            out[(r, c)] = t[r][c];
-            out[(c, r)] = t[r][c];
+            x[(r, c)] = t[r][c];
+            x[(c, r)] = t[r][c];
         }
         for s in 0..=r {
             let v = t[r].dot(&rows[s]);
-            out[(r, s)] = v;
-            out[(s, r)] = v;
+            x[(r, s)] = v;
+            x[(s, r)] = v;
         }
     }
-    out
 }
 
 /// A measurement matrix by its nonzero entries per row. The gyro rows are unit rows and the
@@ -164,6 +185,8 @@ pub struct SparseRows<const M: usize, const N: usize> {
     index: [[usize; N]; M],
     value: [[f64; N]; M],
     len: [usize; M],
+    /// Every row is a single 1: `H` only picks coordinates (the rates-only models).
+    selector: bool,
 }
 
 impl<const M: usize, const N: usize> SparseRows<M, N> {
@@ -172,6 +195,7 @@ impl<const M: usize, const N: usize> SparseRows<M, N> {
             index: [[0; N]; M],
             value: [[0.0; N]; M],
             len: [0; M],
+            selector: false,
         };
         for m in 0..M {
             for c in 0..N {
@@ -183,7 +207,14 @@ impl<const M: usize, const N: usize> SparseRows<M, N> {
                 }
             }
         }
+        s.selector = (0..M).all(|m| s.len[m] == 1 && s.value[m][0] == 1.0);
         s
+    }
+
+    /// `H X Hᵀ` when `H` only picks coordinates: the picked block of `X`, no arithmetic.
+    pub fn picked(&self, x: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, M, M>> {
+        self.selector
+            .then(|| SMatrix::from_fn(|a, b| x[(self.index[a][0], self.index[b][0])]))
     }
 
     fn row(&self, m: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
@@ -206,9 +237,15 @@ impl<const M: usize, const N: usize> SparseRows<M, N> {
     /// `H X`.
     pub fn left<const C: usize>(&self, x: &SMatrix<f64, N, C>) -> SMatrix<f64, M, C> {
         let mut out = SMatrix::<f64, M, C>::zeros();
-        for j in 0..C {
-            for m in 0..M {
-                out[(m, j)] = self.row(m).map(|(c, v)| v * x[(c, j)]).sum();
+        for m in 0..M {
+            let (index, value) = (&self.index[m][..self.len[m]], &self.value[m][..self.len[m]]);
+            for (j, col) in x.as_slice().chunks_exact(N).enumerate() {
+                // -0.0: the neutral element `Iterator::sum` starts from.
+                let mut acc = -0.0;
+                for (&c, &v) in index.iter().zip(value) {
+                    acc += v * col[c];
+                }
+                out[(m, j)] = acc;
             }
         }
         out
@@ -263,6 +300,24 @@ mod tests {
         let g = SMatrix::<f64, 11, 11>::identity() - k * h;
         let dense = g * x * g.transpose();
         assert!((sandwich_gain(&x, &k, &sh) - dense).amax() < 1e-10 * dense.amax());
+    }
+
+    #[test]
+    fn a_picking_h_gives_the_block_and_others_no_shortcut() {
+        let b = test_matrix::<5, 5>(0.43);
+        let x = b * b.transpose();
+        let mut h = SMatrix::<f64, 3, 5>::zeros();
+        for r in 0..3 {
+            h[(r, r)] = 1.0;
+        }
+        let block = SparseRows::new(&h).picked(&x).expect("H picks the rates");
+        assert_eq!(block, h * x * h.transpose());
+        // A scaled or mixed row is a product, not a pick.
+        h[(2, 2)] = 0.5;
+        assert!(SparseRows::new(&h).picked(&x).is_none());
+        h[(2, 2)] = 1.0;
+        h[(2, 4)] = 0.3;
+        assert!(SparseRows::new(&h).picked(&x).is_none());
     }
 
     #[test]

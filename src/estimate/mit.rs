@@ -203,9 +203,9 @@ impl<const N: usize> Sensitivity<N> {
     /// [`Sensitivity::propagate`] for the entries not in `skip` (theirs stay as they are).
     pub fn propagate_masked(&mut self, a: &impl Sandwich<N>, forgetting: f64, skip: &[bool; N]) {
         for (i, m) in self.m.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
-            let mut next = a.sandwich(m) * forgetting;
-            next[(i, i)] += 1.0;
-            *m = next;
+            *m = a.sandwich(m);
+            *m *= forgetting;
+            m[(i, i)] += 1.0;
         }
     }
 
@@ -253,7 +253,9 @@ pub fn h_x_ht<const M: usize, const N: usize>(
     sh: &SparseRows<M, N>,
     x: &SMatrix<f64, N, N>,
 ) -> SMatrix<f64, M, M> {
-    if N <= SMALL_N {
+    if let Some(block) = sh.picked(x) {
+        block
+    } else if N <= SMALL_N {
         h * x * h.transpose()
     } else {
         sh.left(&sh.right_t(x))

@@ -78,9 +78,6 @@ impl<const N: usize> ShapeSensitivity<N> {
         let k_t = st.gain.transpose();
         for i in (0..N).filter(|&i| !self.skip[i]) {
             let dp_prev = &self.dp[i];
-            // d(A P Aᵀ) = λ A dP_{k-1} Aᵀ (λ: forgetting). The matrix is never formed scaled:
-            // every use below carries λ in its coefficient.
-            let a_dp_a = super::linalg::sandwich_walk(a, dp_prev, walk_from);
             // Linearisation-error set: Q̄_rr = d_r b_r², b_r = Σ |c|/2 √(P_jj P_kk).
             let mut db = SVector::<f64, N>::zeros();
             for term in terms {
@@ -94,6 +91,11 @@ impl<const N: usize> ShapeSensitivity<N> {
                         / prod.sqrt();
                 }
             }
+            // d(A P Aᵀ) = λ A dP_{k-1} Aᵀ (λ: forgetting), computed over dP_{k-1} (read only
+            // above), which the assembly below then overwrites entry by entry with dP_k. The
+            // matrix is never formed scaled: every use carries λ in its coefficient.
+            let a_dp_a = &mut self.dp[i];
+            super::linalg::sandwich_walk_in_place(a, a_dp_a, walk_from);
             let dqbar = st.half_widths.component_mul(&db) * (2.0 * d_r);
             let mut dq = SVector::<f64, N>::zeros();
             dq[i] = 1.0;
@@ -118,7 +120,7 @@ impl<const N: usize> ShapeSensitivity<N> {
             let c_a = forgetting / (1.0 - beta);
             let c_apa = dbeta / (1.0 - beta).powi(2);
             let d_diag = dq_hat / beta - st.q_hat * (dbeta / (beta * beta));
-            let mut h_dpi = sh.right_t(&a_dp_a).transpose() * c_a + h_apa * c_apa;
+            let mut h_dpi = sh.right_t(a_dp_a).transpose() * c_a + h_apa * c_apa;
             for j in 0..N {
                 for m in 0..M {
                     h_dpi[(m, j)] += h[(m, j)] * d_diag[j];
@@ -147,26 +149,25 @@ impl<const N: usize> ShapeSensitivity<N> {
             let z = h_dpip - h_dpip_h * k_t;
             let c_krk = drho / (rho * rho);
             let (ca, capa) = (c_a * c_pi, c_apa * c_pi);
-            let dp = &mut self.dp[i];
+            // Column by column over the upper triangle (contiguous slices), then mirrored.
+            let (apa, pi) = (st.apa.as_slice(), st.pi.as_slice());
+            let (krk, p_bar) = (krk.as_slice(), st.p_bar.as_slice());
             let mut trace = 0.0;
-            for c in 0..N {
-                for rr in 0..=c {
-                    let mut dpi_prime =
-                        ca * a_dp_a[(rr, c)] + capa * st.apa[(rr, c)] + c_rho * st.pi[(rr, c)];
+            for (c, col) in a_dp_a.as_mut_slice().chunks_exact_mut(N).enumerate() {
+                let (k_c, z_c) = (k_t.column(c), z.column(c));
+                for (rr, x) in col[..=c].iter_mut().enumerate() {
+                    let idx = c * N + rr;
+                    let mut dpi_prime = ca * *x + capa * apa[idx] + c_rho * pi[idx];
                     if rr == c {
                         dpi_prime += c_pi * d_diag[c];
                     }
-                    let gain_terms =
-                        k_t.column(rr).dot(&z.column(c)) + k_t.column(c).dot(&h_dpip.column(rr));
-                    let dp_bar = dpi_prime - gain_terms - c_krk * krk[(rr, c)];
-                    let v = ddelta * st.p_bar[(rr, c)] + delta * dp_bar;
-                    dp[(rr, c)] = v;
-                    dp[(c, rr)] = v;
-                    if rr == c {
-                        trace += v;
-                    }
+                    let gain_terms = k_t.column(rr).dot(&z_c) + k_c.dot(&h_dpip.column(rr));
+                    let dp_bar = dpi_prime - gain_terms - c_krk * krk[idx];
+                    *x = ddelta * p_bar[idx] + delta * dp_bar;
                 }
+                trace += col[c];
             }
+            super::linalg::mirror_upper(a_dp_a);
             grad[i] = -ddelta * tr_p + (1.0 - delta) * trace;
         }
         grad

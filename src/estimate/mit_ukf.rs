@@ -83,16 +83,24 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.sensitivity
             .propagate_masked(&a, self.adapt.forgetting, &self.fixed);
         let ahc = self.ukf.model.ahc_start();
-        let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
-        for i in (ahc..N).filter(|&i| self.fixed[i]) {
-            next[(i, i)] += self.ukf.process_noise[i];
+        // With no AHC entry fixed the sum stays zero: skip its propagation.
+        let any_fixed_ahc = (ahc..N).any(|i| self.fixed[i]);
+        if any_fixed_ahc {
+            let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
+            for i in (ahc..N).filter(|&i| self.fixed[i]) {
+                next[(i, i)] += self.ukf.process_noise[i];
+            }
+            self.fixed_sum = next;
         }
-        self.fixed_sum = next;
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
         let (h, sh) = (&self.ukf.h, SparseRows::new(&self.ukf.h));
         let hmh = self.sensitivity.projected_with(h, &sh, &self.fixed);
-        let mut s_ahc = h_x_ht(h, &sh, &self.fixed_sum);
+        let mut s_ahc = if any_fixed_ahc {
+            h_x_ht(h, &sh, &self.fixed_sum)
+        } else {
+            SMatrix::zeros()
+        };
         for i in (ahc..N).filter(|&i| !self.fixed[i]) {
             s_ahc += hmh[i] * self.ukf.process_noise[i];
         }
