@@ -8,8 +8,8 @@
 //! of estimators.md §3.5 (see [`EsmfParams`]).
 
 use super::linalg::{
-    SparseRows, cholesky_jitter, identity_tail_start, mirror_upper, sandwich_walk, sym_top_eigen,
-    symmetrize,
+    SparseRows, cholesky_jitter, identity_tail_start, mirror_upper, sandwich_walk_in_place,
+    sym_top_eigen, symmetrize,
 };
 use super::{Estimator, EstimatorError, check_inputs};
 use crate::model::{BilinearTerm, Model};
@@ -143,7 +143,8 @@ pub fn shape_step<const N: usize, const M: usize>(
     r_sqrt_lmax: f64,
     e: &SVector<f64, M>,
 ) -> Result<(), EstimatorError> {
-    st.apa = sandwich_walk(a, p_prev, identity_tail_start(a));
+    st.apa = *p_prev;
+    sandwich_walk_in_place(a, &mut st.apa, identity_tail_start(a));
     symmetrize(&mut st.apa);
     st.half_widths = *half_widths;
     let d_r = remainder_dim(half_widths);
