@@ -366,7 +366,9 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
     /// directions the data do not see (gain against bias in a steady hover) from growing
     /// without end under the Minkowski prediction.
     pub fn intersect_box(&mut self) {
-        // Between cuts only the upper triangle of P is kept current (mirrored once at the end).
+        // P comes in exactly symmetric and finite (the step symmetrises it and rejects a
+        // non-finite shape). Between cuts only its upper triangle is kept current (mirrored
+        // once at the end).
         let mut cut = false;
         for i in 0..N {
             let r = self.box_half[i];

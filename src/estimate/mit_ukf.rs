@@ -83,9 +83,11 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.sensitivity
             .propagate_masked(&a, self.adapt.forgetting, &self.fixed);
         let ahc = self.ukf.model.ahc_start();
-        // With no AHC entry fixed the sum stays zero: skip its propagation.
-        let any_fixed_ahc = (ahc..N).any(|i| self.fixed[i]);
-        if any_fixed_ahc {
+        // While no AHC entry is fixed and the sum is zero (never fixed, or `fixed` changed
+        // back) it stays zero: skip its propagation.
+        let propagate_fixed_sum =
+            (ahc..N).any(|i| self.fixed[i]) || self.fixed_sum.iter().any(|v| *v != 0.0);
+        if propagate_fixed_sum {
             let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
             for i in (ahc..N).filter(|&i| self.fixed[i]) {
                 next[(i, i)] += self.ukf.process_noise[i];
@@ -96,7 +98,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
         let (h, sh) = (&self.ukf.h, SparseRows::new(&self.ukf.h));
         let hmh = self.sensitivity.projected_with(h, &sh, &self.fixed);
-        let mut s_ahc = if any_fixed_ahc {
+        let mut s_ahc = if propagate_fixed_sum {
             h_x_ht(h, &sh, &self.fixed_sum)
         } else {
             SMatrix::zeros()
