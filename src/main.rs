@@ -12,7 +12,7 @@ use ahcmon::telemetry::{Profile, ProfileError};
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// `print!` that ends the program quietly when stdout is closed (`ahcmon eval | head`)
@@ -266,7 +266,18 @@ impl RunArgs {
         })
     }
 
-    fn files(&self) -> anyhow::Result<MonitorFiles> {
+    /// The JSON-lines files, created only once no output names an input or another output.
+    fn files(
+        &self,
+        inputs: &[&Path],
+        more: &[(&str, Option<&Path>)],
+    ) -> anyhow::Result<MonitorFiles> {
+        let mut outputs = vec![
+            ("--decisions", self.decisions.as_deref()),
+            ("--estimates", self.estimates.as_deref()),
+        ];
+        outputs.extend_from_slice(more);
+        check_outputs(inputs, &outputs)?;
         MonitorFiles::new(
             self.decisions.as_deref(),
             self.estimates.as_deref(),
@@ -274,6 +285,52 @@ impl RunArgs {
         )
         .context("cannot create output file")
     }
+}
+
+/// Whether two paths name the same regular file: an existing one by its canonical path, a new
+/// one by its directory's canonical path and its name. Devices (`/dev/null`) never clash.
+fn same_file(a: &Path, b: &Path) -> bool {
+    fn canonical(p: &Path) -> Option<PathBuf> {
+        match std::fs::metadata(p) {
+            Ok(m) if !m.is_file() => None,
+            Ok(_) => std::fs::canonicalize(p).ok(),
+            Err(_) => {
+                let dir = p.parent().filter(|d| !d.as_os_str().is_empty());
+                Some(
+                    std::fs::canonicalize(dir.unwrap_or(Path::new(".")))
+                        .ok()?
+                        .join(p.file_name()?),
+                )
+            }
+        }
+    }
+    matches!((canonical(a), canonical(b)), (Some(x), Some(y)) if x == y)
+}
+
+/// Refuse, before anything is created, an output that would overwrite an input (a replayed
+/// log) or another output.
+fn check_outputs(inputs: &[&Path], outputs: &[(&str, Option<&Path>)]) -> Result<(), UsageError> {
+    let outputs: Vec<(&str, &Path)> = outputs
+        .iter()
+        .filter_map(|(flag, p)| p.map(|p| (*flag, p)))
+        .collect();
+    for (k, (flag, out)) in outputs.iter().enumerate() {
+        // Only an existing input can be overwritten (a built-in scenario name is no file).
+        if let Some(input) = inputs.iter().find(|i| i.is_file() && same_file(out, i)) {
+            return Err(UsageError(format!(
+                "{flag} {}: that is the input file {}, which it would overwrite",
+                out.display(),
+                input.display()
+            )));
+        }
+        if let Some((other, _)) = outputs[k + 1..].iter().find(|(_, o)| same_file(out, o)) {
+            return Err(UsageError(format!(
+                "{flag} and {other} name the same file ({})",
+                out.display()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Errors that are the user's input (exit code 2) rather than ours (exit code 1).
@@ -335,6 +392,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .into());
                 };
                 let named = scenario::resolve(one)?;
+                check_outputs(
+                    &[Path::new(one)],
+                    &[
+                        ("--decisions", decisions.as_deref()),
+                        ("--estimates", estimates.as_deref()),
+                    ],
+                )?;
                 let files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), decimate)
                     .context("cannot create output file")?;
                 return run_with_files(&named, named.scenario.seed, files, false);
@@ -360,6 +424,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             autopilot,
         } => {
             let named = scenario::resolve(&name)?;
+            check_outputs(
+                &[Path::new(&name)],
+                &[
+                    ("--truth", truth.as_deref()),
+                    ("--decisions", decisions.as_deref()),
+                    ("--estimates", estimates.as_deref()),
+                    ("--tlog", tlog.as_deref()),
+                ],
+            )?;
             if out.is_some() || tlog.is_some() {
                 if decisions.is_some() || estimates.is_some() {
                     return Err(UsageError(
@@ -387,7 +460,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if let Some(path) = &truth {
                 files = files
                     .with_truth(path, cfg.gyro_noise, cfg.az_noise)
-                    .with_context(|| format!("cannot create {}", path.display()))?;
+                    .context("cannot create output file")?;
             }
             run_with_files(&named, seed.unwrap_or(named.scenario.seed), files, true)
         }
@@ -672,7 +745,7 @@ fn monitor(
         ..Default::default()
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
-    let mut files = args.files()?;
+    let mut files = args.files(&[], &[])?;
     if alerts.is_some() {
         files.alerts = Some(ahcmon::output::alerts::Alerts::default());
     }
@@ -793,6 +866,7 @@ fn calibrate(
     profile: Option<&str>,
 ) -> anyhow::Result<()> {
     let until = positive("--until", until)?;
+    check_outputs(&[file], &[("--output", Some(output))])?;
     let input_error = |source| InputFileError {
         path: file.display().to_string(),
         source,
@@ -902,7 +976,7 @@ fn replay(
     let size = std::fs::metadata(file).map_err(input_error)?.len();
     let mut reader = TlogReader::open(file).map_err(input_error)?;
     let mut monitor = Monitor::new(args.pipeline_config()?);
-    let mut files = args.files()?;
+    let mut files = args.files(&[file], &[("--plot", plot)])?;
     if let Some(p) = plot {
         // Fail now rather than after a long replay.
         std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
@@ -998,7 +1072,16 @@ fn replay(
         file.display(),
         replay_time.as_secs_f64()
     );
-    write_error.map_or(Ok(()), Err)
+    write_error.map_or(Ok(()), Err)?;
+    // Not a telemetry log at all: say so with an input error, so a script can tell.
+    if reader.counters.frames == 0 {
+        return Err(UsageError(format!(
+            "{}: no MAVLink frame in its {size} bytes; is it a telemetry log (.tlog)?",
+            file.display()
+        ))
+        .into());
+    }
+    Ok(())
 }
 
 /// `sim --autopilot`.

@@ -412,6 +412,9 @@ impl VehiclePipeline {
                         // Once a run: detection runs again at every take-off until calibrated.
                         for w in &d.warnings {
                             if self.warned.insert(w.clone()) {
+                                // The message is prefixed with the sysid already.
+                                let prefix = format!("sysid {}: ", self.sysid);
+                                let w = w.strip_prefix(&prefix).unwrap_or(w);
                                 sink.message(self.sysid, &format!("warning: {w}"));
                             }
                         }

@@ -244,6 +244,7 @@ impl Scenario {
             && (!g.tau_s.is_finite()
                 || g.tau_s <= 0.0
                 || !g.vertical.is_finite()
+                || g.vertical < 0.0
                 || g.angular.iter().any(|v| !v.is_finite() || *v < 0.0))
         {
             return Err("gusts: finite non-negative levels and a positive tau_s".into());
@@ -270,6 +271,12 @@ impl Scenario {
         if self.duration_s <= 0.0 || self.rate_hz <= 0.0 {
             return Err("duration_s and rate_hz must be positive".into());
         }
+        if self.steps() == 0 {
+            return Err(format!(
+                "duration_s = {} at rate_hz = {} is not one step",
+                self.duration_s, self.rate_hz
+            ));
+        }
         if self.steps() > 50_000_000 {
             return Err(format!(
                 "{} steps is more than this tool will simulate",
@@ -287,6 +294,37 @@ impl Scenario {
         {
             return Err("dither: amplitude and frequencies must be finite".into());
         }
+        if let Some(d) = &self.attitude_dither
+            && (d.amplitude.iter().any(|v| !v.is_finite())
+                || d.freqs_hz.iter().any(|f| !f.is_finite() || *f < 0.0))
+        {
+            return Err(
+                "attitude_dither: amplitudes must be finite and frequencies finite and non-negative"
+                    .into(),
+            );
+        }
+        for m in &self.manoeuvres {
+            for (name, v) in [
+                ("t", m.t),
+                ("duration_s", m.duration_s),
+                ("roll_deg", m.roll_deg),
+                ("pitch_deg", m.pitch_deg),
+                ("yaw_rate_dps", m.yaw_rate_dps),
+            ] {
+                if !v.is_finite() {
+                    return Err(format!(
+                        "manoeuvre at t = {}: {name} is not a finite number ({v})",
+                        m.t
+                    ));
+                }
+            }
+            if m.duration_s < 0.0 {
+                return Err(format!(
+                    "manoeuvre at t = {}: duration_s must not be negative",
+                    m.t
+                ));
+            }
+        }
         for f in &self.faults {
             if !actuators.contains(&f.actuator) {
                 return Err(format!(
@@ -296,6 +334,19 @@ impl Scenario {
                 ));
             }
             f.validate()?;
+            // A fault outside the flight would be scored as a healthy flight.
+            if !(0.0..self.duration_s).contains(&f.t) {
+                return Err(format!(
+                    "fault on `{}` at t = {} s is outside the flight (0 to duration_s = {} s)",
+                    f.actuator, f.t, self.duration_s
+                ));
+            }
+            if f.until.is_some_and(|u| u <= f.t) {
+                return Err(format!(
+                    "fault on `{}`: until must come after t = {} s",
+                    f.actuator, f.t
+                ));
+            }
         }
         let e = &self.eval;
         for (name, v) in [

@@ -334,3 +334,183 @@ fn a_px4_stream_is_read_like_an_ardupilot_one() {
     }
     assert_eq!(first[0], first[1]);
 }
+
+/// An output that names the log being read (or another output) is refused before anything
+/// is created: the log is left as it was.
+#[test]
+fn an_output_never_overwrites_the_input_or_another_output() {
+    let dir = common::temp_dir("cli_same_file");
+    let log = dir.join("flight.tlog");
+    std::fs::copy(
+        common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog"),
+        &log,
+    )
+    .unwrap();
+    let size = std::fs::metadata(&log).unwrap().len();
+    let l = log.to_str().unwrap();
+    // The same file by another spelling.
+    let other = format!("{}/./flight.tlog", dir.display());
+    assert_one_line_error(
+        &["replay", l, "--headless", "--estimates", &other],
+        &["--estimates", "input file"],
+    );
+    assert_one_line_error(
+        &["replay", l, "--headless", "--decisions", l],
+        &["--decisions", "input file"],
+    );
+    assert_one_line_error(
+        &["calibrate", l, "--until", "90", "--output", l],
+        &["--output", "input file"],
+    );
+    assert_eq!(
+        std::fs::metadata(&log).unwrap().len(),
+        size,
+        "the log was touched"
+    );
+    let out = dir.join("out.jsonl");
+    let o = out.to_str().unwrap();
+    assert_one_line_error(
+        &[
+            "replay",
+            l,
+            "--headless",
+            "--decisions",
+            o,
+            "--estimates",
+            o,
+        ],
+        &["--decisions and --estimates", "same file"],
+    );
+    assert!(!out.exists(), "an output was created before the refusal");
+    assert_one_line_error(
+        &[
+            "sim",
+            "--scenario",
+            "quad-x-motor2-loe",
+            "--truth",
+            o,
+            "--estimates",
+            o,
+        ],
+        &["--truth and --estimates", "same file"],
+    );
+    // Devices never clash: both outputs to /dev/null is fine.
+    if std::path::Path::new("/dev/null").exists() {
+        let (code, _, err) = ahcmon(&[
+            "replay",
+            l,
+            "--headless",
+            "--decisions",
+            "/dev/null",
+            "--estimates",
+            "/dev/null",
+        ]);
+        assert_eq!(code, 0, "{err}");
+    }
+}
+
+/// An output that cannot be created is named; a file without MAVLink in it is an input
+/// error (exit 2), not an empty success.
+#[test]
+fn unusable_files_are_named_and_exit_nonzero() {
+    let dir = common::temp_dir("cli_unusable");
+    let missing_dir = dir.join("no/such/dir/d.jsonl");
+    let m = missing_dir.to_str().unwrap();
+    let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let (code, _, err) = ahcmon(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--headless",
+        "--decisions",
+        m,
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains(m) && err.contains("cannot create"), "{err}");
+    let text = dir.join("notes.txt");
+    std::fs::write(&text, "not a telemetry log\n".repeat(50)).unwrap();
+    let (code, out, err) = ahcmon(&["replay", text.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("no MAVLink frame") && err.contains("notes.txt"),
+        "{err}"
+    );
+    assert!(
+        out.contains("no vehicle seen"),
+        "the summary still comes: {out}"
+    );
+}
+
+/// Scenario values the simulator would take silently: refused with the key named.
+#[test]
+fn scenario_values_outside_the_flight_or_not_finite_are_refused() {
+    let dir = common::temp_dir("cli_scenario_values");
+    let base = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("replay/scenarios/quad-x-motor2-loe.toml"),
+    )
+    .unwrap();
+    let cases = [
+        (
+            "late",
+            base.replace("t = 15.0", "t = 1000.0"),
+            "outside the flight",
+        ),
+        (
+            "negative",
+            base.replace("t = 15.0", "t = -3.0"),
+            "outside the flight",
+        ),
+        (
+            "dither",
+            base.replace("amplitude = [0.05", "amplitude = [nan"),
+            "attitude_dither",
+        ),
+        (
+            "manoeuvre",
+            format!("{base}\n[[manoeuvre]]\nt = 5.0\nduration_s = 2.0\nroll_deg = nan\n"),
+            "roll_deg",
+        ),
+        (
+            "steps",
+            base.replace("rate_hz = 50.0", "rate_hz = 0.001"),
+            "not one step",
+        ),
+    ];
+    for (name, text, says) in cases {
+        assert_ne!(text, base, "case {name} changed nothing");
+        let path = dir.join(format!("{name}.toml"));
+        std::fs::write(&path, text).unwrap();
+        assert_one_line_error(&["sim", "--scenario", path.to_str().unwrap()], &[says]);
+    }
+}
+
+/// A profile whose geometry is scaled by a gain it leaves out cannot see that actuator.
+#[test]
+fn a_profile_without_the_gains_its_actuators_need_is_refused() {
+    let dir = common::temp_dir("cli_profile_gains");
+    let base = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("replay/profiles/quad-x.toml"),
+    )
+    .unwrap();
+    for gain in ["roll_gain", "yaw_gain", "thrust_gain"] {
+        let text: String = base
+            .lines()
+            .filter(|l| !l.starts_with(gain))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert_ne!(text, base);
+        let path = dir.join(format!("no-{gain}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+        assert_one_line_error(
+            &[
+                "replay",
+                log.to_str().unwrap(),
+                "--headless",
+                "--profile",
+                path.to_str().unwrap(),
+            ],
+            &[gain, "motor1"],
+        );
+    }
+}

@@ -17,8 +17,11 @@ pub struct JsonlWriter<W: Write> {
 }
 
 impl JsonlWriter<BufWriter<File>> {
+    /// Create (truncate) the file; the error names it.
     pub fn create(path: &Path) -> std::io::Result<Self> {
-        Ok(Self::new(BufWriter::new(File::create(path)?)))
+        let file = File::create(path)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
+        Ok(Self::new(BufWriter::new(file)))
     }
 }
 

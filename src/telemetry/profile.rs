@@ -293,6 +293,39 @@ impl Profile {
         {
             return Err("diagnosis.gain_threshold must be positive".into());
         }
+        // A geometry column scaled by a gain left out (0) cannot move: its gamma would read
+        // healthy whatever the actuator does.
+        if m.arx.is_none() {
+            for a in &self.actuators {
+                let mut needs: Vec<(&str, f64)> = match (a.role, a.effectiveness) {
+                    (_, Some(_)) => vec![],
+                    (Role::Motor, None) => vec![
+                        ("roll_gain", m.roll_gain),
+                        ("pitch_gain", m.pitch_gain),
+                        ("yaw_gain", m.yaw_gain),
+                    ],
+                    (Role::Swash, None) => {
+                        vec![("roll_gain", m.roll_gain), ("pitch_gain", m.pitch_gain)]
+                    }
+                    (Role::Tail | Role::Rudder, None) => vec![("yaw_gain", m.yaw_gain)],
+                    (Role::Aileron, None) => vec![("roll_gain", m.roll_gain)],
+                    (Role::Elevator, None) => vec![("pitch_gain", m.pitch_gain)],
+                    (Role::Throttle | Role::Custom, None) => vec![],
+                };
+                if m.measure_az
+                    && matches!(a.role, Role::Motor | Role::Swash)
+                    && a.vertical.is_none()
+                {
+                    needs.push(("thrust_gain", m.thrust_gain));
+                }
+                if let Some((gain, _)) = needs.iter().find(|(_, v)| *v == 0.0) {
+                    return Err(format!(
+                        "model.{gain} is 0 or missing, but actuator `{}` needs it (its column of G is the geometry scaled by it)",
+                        a.name
+                    ));
+                }
+            }
+        }
         if let Some(a) = &m.arx {
             if a.input.len() != l || (!a.vertical.is_empty() && a.vertical.len() != l) {
                 return Err(format!(
