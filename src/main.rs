@@ -341,7 +341,7 @@ fn is_input_error(e: &anyhow::Error) -> bool {
             || c.is::<EvalError>()
             || c.is::<ProfileError>()
             || c.is::<InputFileError>()
-            || matches!(c.downcast_ref::<ConnError>(), Some(ConnError::Syntax(_)))
+            || matches!(c.downcast_ref::<ConnError>(), Some(ConnError::Syntax(..)))
     })
 }
 
@@ -609,6 +609,18 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         .map(|x| in_range("--speed", x, SPEED_RANGE.0, SPEED_RANGE.1))
         .transpose()?;
     let spec: Option<ConnSpec> = o.out.as_deref().map(str::parse).transpose()?;
+    // A monitor with default settings takes the first settle + calibration seconds of the
+    // flight as healthy: a fault in them becomes the vehicle's normal.
+    let defaults = PipelineConfig::default();
+    let learned_until = defaults.settle_s + defaults.calibrate_s;
+    if let Some(f) = named.scenario.first_fault()
+        && f.t < learned_until
+    {
+        eprintln!(
+            "sim: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later; or give the monitor --calibrate-until)",
+            f.actuator, f.t
+        );
+    }
     let mut tlog = o
         .tlog
         .as_deref()
@@ -895,8 +907,29 @@ fn calibrate(
         }
     }
     let Some((sysid, Some(mut calibrated), fit, arx)) = found else {
+        // Why, per vehicle, as the replay summary says it.
+        let reasons: Vec<String> = monitor
+            .pipelines
+            .iter()
+            .map(|(sysid, p)| {
+                let heartbeat = monitor
+                    .assembler
+                    .vehicles
+                    .get(sysid)
+                    .is_some_and(|v| v.info.mav_type.is_some());
+                let why = p
+                    .why_not_estimating(heartbeat)
+                    .unwrap_or_else(|| format!("stopped {}", p.stage_name()));
+                format!("sysid {sysid}: {why}")
+            })
+            .collect();
+        let why = if reasons.is_empty() {
+            "no vehicle with rates and outputs in it".to_string()
+        } else {
+            reasons.join("; ")
+        };
         return Err(UsageError(format!(
-            "{}: no airborne stretch of a vehicle ended before t = {until} s (vehicle time); nothing to calibrate",
+            "{}: no healthy stretch ending at t = {until} s (vehicle time) to calibrate on: {why}",
             file.display()
         ))
         .into());

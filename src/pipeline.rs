@@ -161,6 +161,8 @@ pub struct VehiclePipeline {
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
     /// Said once that an output channel carries no PWM.
     warned_missing_output: bool,
+    /// Why the run failed (said when it happened; repeated in the summary).
+    failure: Option<String>,
 }
 
 /// The calibrated profile's rate and noise levels: the process noise from what the model could
@@ -211,6 +213,7 @@ impl VehiclePipeline {
             last_sample_t: None,
             active: [None; MAX_ACTUATORS],
             warned_missing_output: false,
+            failure: None,
         }
     }
 
@@ -246,36 +249,70 @@ impl VehiclePipeline {
     /// Why the run has not estimated anything yet, when it has not (`None` once it has).
     /// `heartbeat`: an autopilot HEARTBEAT was seen (without one the armed flag is unknown).
     pub fn why_not_estimating(&self, heartbeat: bool) -> Option<String> {
-        if self.counters.steps > 0 || !matches!(self.stage, Stage::Grounded) {
+        if self.counters.steps > 0 {
+            return None;
+        }
+        // Still calibrating when the data ended.
+        if let Stage::Calibrating { samples, .. } = &self.stage {
+            let (first, last) = (samples.first()?.t, samples.last()?.t);
+            return Some(match self.cfg.calibrate_until {
+                Some(until) => format!(
+                    "the calibration stretch was chosen to end at t={until} s, but the data end at t={last:.2} s (it began at t={first:.2} s)"
+                ),
+                None => format!(
+                    "the data end {:.1} s into the {} s calibration stretch",
+                    last - first,
+                    self.cfg.calibrate_s
+                ),
+            });
+        }
+        if matches!(self.stage, Stage::Failed) {
+            return Some(self.failure.clone().unwrap_or_else(|| "failed".into()));
+        }
+        if !matches!(self.stage, Stage::Grounded) {
             return None;
         }
         let g = &self.gate;
-        Some(if g.longest_airborne_s > 0.0 {
-            format!(
-                "airborne for at most {:.1} s, and no calibration completed (it starts {} s after take-off; a landing, a reboot or a failed fit, said above, start it over)",
-                g.longest_airborne_s, self.cfg.settle_s
-            )
-        } else if !heartbeat {
-            format!(
-                "no autopilot HEARTBEAT in these {} samples, so the vehicle was never known to be armed",
-                g.samples
-            )
-        } else if g.armed_samples == 0 {
-            format!(
-                "the vehicle never armed in these {} samples (HEARTBEAT base_mode); the monitor estimates in flight only",
-                g.samples
-            )
-        } else if let Some(h) = g.max_rel_alt_armed {
-            format!(
-                "armed for up to {:.1} s, but never above {} m relative altitude (highest {h:.1} m), so never taken as airborne",
-                g.longest_armed_s, self.cfg.airborne_alt_m
-            )
-        } else {
-            format!(
-                "armed for up to {:.1} s without a relative altitude; {} s armed counts as airborne",
-                g.longest_armed_s, self.cfg.armed_airborne_s
-            )
-        })
+        Some(
+            if let (true, Some(until)) = (g.longest_airborne_s > 0.0, self.cfg.calibrate_until) {
+                format!(
+                    "airborne for at most {:.1} s, but the calibration stretch was chosen to end at t={until} s: the vehicle had landed (or the data ended) before then, and a stretch must end in flight",
+                    g.longest_airborne_s
+                )
+            } else if g.longest_airborne_s > 0.0 {
+                format!(
+                    "airborne for at most {:.1} s, and no calibration completed (it starts {} s after take-off; a landing, a reboot or a failed fit, said above, start it over)",
+                    g.longest_airborne_s, self.cfg.settle_s
+                )
+            } else if !heartbeat {
+                format!(
+                    "no autopilot HEARTBEAT in these {} samples, so the vehicle was never known to be armed",
+                    g.samples
+                )
+            } else if g.armed_samples == 0 {
+                format!(
+                    "the vehicle never armed in these {} samples (HEARTBEAT base_mode); the monitor estimates in flight only",
+                    g.samples
+                )
+            } else if let Some(h) = g.max_rel_alt_armed {
+                format!(
+                    "armed for up to {:.1} s, but never above {} m relative altitude (highest {h:.1} m), so never taken as airborne",
+                    g.longest_armed_s, self.cfg.airborne_alt_m
+                )
+            } else {
+                format!(
+                    "armed for up to {:.1} s without a relative altitude; {} s armed counts as airborne",
+                    g.longest_armed_s, self.cfg.armed_airborne_s
+                )
+            },
+        )
+    }
+
+    /// Stop this vehicle's run: said now, and kept for the summary.
+    fn fail(&mut self, why: String, sink: &mut dyn PipelineSink) {
+        sink.message(self.sysid, &format!("error: {why}"));
+        self.failure = Some(why);
+        self.stage = Stage::Failed;
     }
 
     pub fn stage_name(&self) -> &'static str {
@@ -431,10 +468,7 @@ impl VehiclePipeline {
                         };
                         self.detection = Some(d);
                     }
-                    Err(e) => {
-                        sink.message(self.sysid, &format!("error: {e}"));
-                        self.stage = Stage::Failed;
-                    }
+                    Err(e) => self.fail(e.to_string(), sink),
                 }
             }
             Stage::Calibrating { profile, samples } => {
@@ -451,6 +485,17 @@ impl VehiclePipeline {
                     az: s.az,
                 });
                 let start = samples[0].t;
+                if let Some(until) = self.cfg.calibrate_until
+                    && until <= start
+                {
+                    self.fail(
+                        format!(
+                            "the calibration stretch was chosen to end at t={until} s, before it can start (airborne and settled at t={start:.2} s): give a later end"
+                        ),
+                        sink,
+                    );
+                    return;
+                }
                 let done = match self.cfg.calibrate_until {
                     Some(until) => s.t >= until,
                     None => s.t - start >= self.cfg.calibrate_s,
@@ -700,8 +745,7 @@ impl VehiclePipeline {
                     // The stretch was unusable (too short, too many holes): not the vehicle,
                     // so the next stretch may do; a stretch the user chose is not retried.
                     if self.cfg.calibrate_until.is_some() {
-                        sink.message(self.sysid, &format!("error: calibration failed: {e}"));
-                        self.stage = Stage::Failed;
+                        self.fail(format!("calibration failed: {e}"), sink);
                     } else {
                         sink.message(
                             self.sysid,
@@ -747,8 +791,7 @@ impl VehiclePipeline {
         let filters = match build(&calibrated, dt) {
             Ok(f) => f,
             Err(e) => {
-                sink.message(self.sysid, &format!("error: {e}"));
-                self.stage = Stage::Failed;
+                self.fail(e.to_string(), sink);
                 return;
             }
         };

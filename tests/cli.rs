@@ -514,3 +514,36 @@ fn a_profile_without_the_gains_its_actuators_need_is_refused() {
         );
     }
 }
+
+/// A chosen calibration end outside the flight: the replay and `calibrate` say which way.
+#[test]
+fn a_calibration_end_outside_the_flight_is_explained() {
+    let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let l = log.to_str().unwrap();
+    // Before take-off (about t = 71 s in this log).
+    let (code, out, err) = ahcmon(&["replay", l, "--headless", "--calibrate-until", "30"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains(
+            "no estimates: the calibration stretch was chosen to end at t=30 s, before it can start"
+        ),
+        "{out}"
+    );
+    // After the end of the log (t = 153 s).
+    let (_, out, _) = ahcmon(&["replay", l, "--headless", "--calibrate-until", "1000"]);
+    assert!(out.contains("but the data end at t=153."), "{out}");
+    let dir = common::temp_dir("cli_calibrate_window");
+    let p = dir.join("p.toml");
+    assert_one_line_error(
+        &[
+            "calibrate",
+            l,
+            "--until",
+            "1000",
+            "--output",
+            p.to_str().unwrap(),
+        ],
+        &["t = 1000 s", "the data end at t=153."],
+    );
+    assert!(!p.exists());
+}

@@ -290,7 +290,12 @@ fn calibrate_writes_a_profile_that_replay_uses() {
         .output()
         .unwrap();
     assert_eq!(run.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&run.stderr).contains("nothing to calibrate"));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("no healthy stretch ending at t = 100000 s")
+            && err.contains("chosen to end at t=100000 s"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -23,9 +23,9 @@ const SEND_WRITE_TIMEOUT: Duration = Duration::from_millis(100);
 #[derive(Debug, Error)]
 pub enum ConnError {
     #[error(
-        "connection `{0}`: expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD"
+        "connection `{0}`: {1}; expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD"
     )]
-    Syntax(String),
+    Syntax(String, String),
     #[error("connection `{spec}`: {source}")]
     Io {
         spec: String,
@@ -47,28 +47,46 @@ pub enum ConnSpec {
 impl FromStr for ConnSpec {
     type Err = ConnError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let bad = || ConnError::Syntax(s.to_string());
-        let (kind, rest) = s.split_once(':').ok_or_else(bad)?;
+        let bad = |why: String| ConnError::Syntax(s.to_string(), why);
+        let (kind, rest) = s
+            .split_once(':')
+            .ok_or_else(|| bad("no kind before a `:`".into()))?;
         if kind == "serial" {
-            let (dev, baud) = rest.rsplit_once(':').ok_or_else(bad)?;
-            let baud = baud.parse().map_err(|_| bad())?;
+            let (dev, baud) = rest
+                .rsplit_once(':')
+                .ok_or_else(|| bad("no baud rate".into()))?;
+            let baud = baud
+                .parse()
+                .map_err(|_| bad(format!("baud rate `{baud}` is not a whole number")))?;
             if dev.is_empty() {
-                return Err(bad());
+                return Err(bad("no device".into()));
             }
             return Ok(Self::Serial(dev.to_string(), baud));
+        }
+        if !matches!(
+            kind,
+            "udpin" | "udp" | "udpout" | "udpbcast" | "tcpin" | "tcpout" | "tcp"
+        ) {
+            return Err(bad(format!("unknown kind `{kind}`")));
+        }
+        let (host, port) = rest.rsplit_once(':').ok_or_else(|| bad("no port".into()))?;
+        if port.parse::<u16>().is_err() {
+            return Err(bad(format!(
+                "port `{port}` is not a number from 0 to 65535"
+            )));
         }
         // HOST may be a name (localhost): resolve it now, once.
         let addr = std::net::ToSocketAddrs::to_socket_addrs(rest)
             .ok()
             .and_then(|mut a| a.next())
-            .ok_or_else(bad)?;
+            .ok_or_else(|| bad(format!("cannot resolve host `{host}`")))?;
         Ok(match kind {
             "udpin" | "udp" => Self::UdpIn(addr),
             "udpout" => Self::UdpOut(addr),
             "udpbcast" => Self::UdpBcast(addr),
             "tcpin" => Self::TcpIn(addr),
             "tcpout" | "tcp" => Self::TcpOut(addr),
-            _ => return Err(bad()),
+            _ => return Err(bad(format!("unknown kind `{kind}`"))),
         })
     }
 }
@@ -382,6 +400,30 @@ mod tests {
             .enable_all()
             .build()
             .expect("runtime")
+    }
+
+    #[test]
+    fn a_bad_connection_string_says_what_is_wrong_with_it() {
+        let cases = [
+            ("udpin:0.0.0.0:99999", "port `99999`"),
+            ("udpin:1234", "no port"),
+            ("nocolon", "no kind"),
+            ("foo:127.0.0.1:5", "unknown kind `foo`"),
+            ("serial:/dev/ttyUSB0:fast", "baud rate `fast`"),
+            ("serial::57600", "no device"),
+        ];
+        for (spec, says) in cases {
+            let e = spec.parse::<ConnSpec>().unwrap_err().to_string();
+            assert!(e.contains(says) && e.contains(spec), "{spec}: {e}");
+        }
+        assert_eq!(
+            "udpin:127.0.0.1:14550".parse::<ConnSpec>().unwrap(),
+            ConnSpec::UdpIn("127.0.0.1:14550".parse().unwrap())
+        );
+        assert_eq!(
+            "serial:/dev/ttyUSB0:57600".parse::<ConnSpec>().unwrap(),
+            ConnSpec::Serial("/dev/ttyUSB0".into(), 57600)
+        );
     }
 
     #[test]
