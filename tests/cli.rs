@@ -547,3 +547,18 @@ fn a_calibration_end_outside_the_flight_is_explained() {
     );
     assert!(!p.exists());
 }
+
+/// A MAVLink stream whose fault falls in what a default monitor calibrates on is warned of;
+/// a `-live` scenario is not.
+#[test]
+fn sim_warns_of_a_fault_in_the_monitors_calibration_stretch() {
+    let dir = common::temp_dir("cli_sim_calibration_warning");
+    let tlog = dir.join("s.tlog");
+    let t = tlog.to_str().unwrap();
+    let (code, _, err) = ahcmon(&["sim", "--scenario", "quad-x-motor2-loe", "--tlog", t]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("calibrates on as healthy"), "{err}");
+    let (code, _, err) = ahcmon(&["sim", "--scenario", "quad-x-motor2-loe-live", "--tlog", t]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("warning"), "{err}");
+}
