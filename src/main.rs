@@ -277,7 +277,13 @@ impl RunArgs {
             ("--estimates", self.estimates.as_deref()),
         ];
         outputs.extend_from_slice(more);
-        check_outputs(inputs, &outputs)?;
+        let mut inputs = inputs.to_vec();
+        inputs.extend(
+            self.profile
+                .as_deref()
+                .and_then(|p| file_input(p, ahcmon::telemetry::profile::BUILTIN)),
+        );
+        check_outputs(&inputs, &outputs)?;
         MonitorFiles::new(
             self.decisions.as_deref(),
             self.estimates.as_deref(),
@@ -287,9 +293,21 @@ impl RunArgs {
     }
 }
 
-/// Whether two paths name the same regular file: an existing one by its canonical path, a new
-/// one by its directory's canonical path and its name. Devices (`/dev/null`) never clash.
+/// The file a scenario or profile argument reads, unless the name is a built-in one (which
+/// takes priority over a file of the same name).
+fn file_input<'a>(name: &'a str, builtin: &[(&str, &str)]) -> Option<&'a Path> {
+    (!builtin.iter().any(|(stem, _)| *stem == name)).then(|| Path::new(name))
+}
+
+/// Whether two paths name the same regular file: two existing ones by device and inode (hard
+/// links too), a new one by its directory's canonical path and its name. Devices
+/// (`/dev/null`) never clash.
 fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+        use std::os::unix::fs::MetadataExt;
+        return x.is_file() && y.is_file() && (x.dev(), x.ino()) == (y.dev(), y.ino());
+    }
     fn canonical(p: &Path) -> Option<PathBuf> {
         match std::fs::metadata(p) {
             Ok(m) if !m.is_file() => None,
@@ -392,8 +410,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .into());
                 };
                 let named = scenario::resolve(one)?;
+                let input = file_input(one, scenario::BUILTIN);
                 check_outputs(
-                    &[Path::new(one)],
+                    input.as_slice(),
                     &[
                         ("--decisions", decisions.as_deref()),
                         ("--estimates", estimates.as_deref()),
@@ -425,7 +444,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             let named = scenario::resolve(&name)?;
             check_outputs(
-                &[Path::new(&name)],
+                file_input(&name, scenario::BUILTIN).as_slice(),
                 &[
                     ("--truth", truth.as_deref()),
                     ("--decisions", decisions.as_deref()),
@@ -493,6 +512,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             speed,
         } => {
             let named = scenario::resolve(name.as_deref().unwrap_or("heli-demo"))?;
+            check_outputs(
+                name.as_deref()
+                    .and_then(|n| file_input(n, scenario::BUILTIN))
+                    .as_slice(),
+                &[
+                    ("--decisions", decisions.as_deref()),
+                    ("--estimates", estimates.as_deref()),
+                ],
+            )?;
             if named.scenario.is_paper() {
                 return Err(UsageError(format!(
                     "{} is a paper scenario; the demo needs a vehicle scenario",
@@ -629,7 +657,7 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
     let mut truth = o
         .truth
         .as_deref()
-        .map(|p| JsonlWriter::create(p).with_context(|| format!("cannot create {}", p.display())))
+        .map(|p| JsonlWriter::create(p).context("cannot create output file"))
         .transpose()?;
     // tlog time: now when live, a fixed epoch otherwise (reproducible files).
     let live = spec.is_some();
@@ -878,7 +906,9 @@ fn calibrate(
     profile: Option<&str>,
 ) -> anyhow::Result<()> {
     let until = positive("--until", until)?;
-    check_outputs(&[file], &[("--output", Some(output))])?;
+    let mut inputs = vec![file];
+    inputs.extend(profile.and_then(|p| file_input(p, ahcmon::telemetry::profile::BUILTIN)));
+    check_outputs(&inputs, &[("--output", Some(output))])?;
     let input_error = |source| InputFileError {
         path: file.display().to_string(),
         source,
@@ -1107,7 +1137,8 @@ fn replay(
     );
     write_error.map_or(Ok(()), Err)?;
     // Not a telemetry log at all: say so with an input error, so a script can tell.
-    if reader.counters.frames == 0 {
+    let c = &reader.counters;
+    if c.frames == 0 && c.unknown_id == 0 {
         return Err(UsageError(format!(
             "{}: no MAVLink frame in its {size} bytes; is it a telemetry log (.tlog)?",
             file.display()

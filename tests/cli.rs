@@ -394,6 +394,66 @@ fn an_output_never_overwrites_the_input_or_another_output() {
         ],
         &["--truth and --estimates", "same file"],
     );
+    // A hard link to the log is the log.
+    let link = dir.join("link.tlog");
+    std::fs::hard_link(&log, &link).unwrap();
+    assert_one_line_error(
+        &[
+            "replay",
+            l,
+            "--headless",
+            "--decisions",
+            link.to_str().unwrap(),
+        ],
+        &["--decisions", "input file"],
+    );
+    // The profile read is an input too.
+    let profile = dir.join("p.toml");
+    std::fs::copy(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("replay/profiles/quad-x.toml"),
+        &profile,
+    )
+    .unwrap();
+    let p = profile.to_str().unwrap();
+    assert_one_line_error(
+        &["replay", l, "--headless", "--profile", p, "--decisions", p],
+        &["--decisions", "input file"],
+    );
+    assert!(
+        std::fs::metadata(&profile).unwrap().len() > 100,
+        "the profile was touched"
+    );
+    assert_one_line_error(
+        &[
+            "eval",
+            "quad-x-motor2-loe",
+            "--decisions",
+            o,
+            "--estimates",
+            o,
+        ],
+        &["--decisions and --estimates", "same file"],
+    );
+    // A built-in name wins over a file of the same name, so that file is no input.
+    let cwd_file = dir.join("quad-x-motor2-loe");
+    std::fs::write(&cwd_file, "old").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .current_dir(&dir)
+        .args([
+            "sim",
+            "--scenario",
+            "quad-x-motor2-loe",
+            "--decisions",
+            "quad-x-motor2-loe",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // Devices never clash: both outputs to /dev/null is fine.
     if std::path::Path::new("/dev/null").exists() {
         let (code, _, err) = ahcmon(&[
@@ -474,6 +534,16 @@ fn scenario_values_outside_the_flight_or_not_finite_are_refused() {
             "steps",
             base.replace("rate_hz = 50.0", "rate_hz = 0.001"),
             "not one step",
+        ),
+        (
+            "until",
+            base.replace("t = 15.0", "t = 15.0\nuntil = 10.0"),
+            "until must come after",
+        ),
+        (
+            "gust",
+            base.replace("vertical = 0.3", "vertical = -0.3"),
+            "gusts",
         ),
     ];
     for (name, text, says) in cases {

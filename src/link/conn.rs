@@ -69,7 +69,10 @@ impl FromStr for ConnSpec {
         ) {
             return Err(bad(format!("unknown kind `{kind}`")));
         }
-        let (host, port) = rest.rsplit_once(':').ok_or_else(|| bad("no port".into()))?;
+        let (host, port) = rest
+            .rsplit_once(':')
+            .filter(|(_, port)| !port.ends_with(']'))
+            .ok_or_else(|| bad("no port".into()))?;
         if port.parse::<u16>().is_err() {
             return Err(bad(format!(
                 "port `{port}` is not a number from 0 to 65535"
@@ -407,6 +410,7 @@ mod tests {
         let cases = [
             ("udpin:0.0.0.0:99999", "port `99999`"),
             ("udpin:1234", "no port"),
+            ("udpin:[::1]", "no port"),
             ("nocolon", "no kind"),
             ("foo:127.0.0.1:5", "unknown kind `foo`"),
             ("serial:/dev/ttyUSB0:fast", "baud rate `fast`"),
