@@ -890,7 +890,7 @@ fn monitor(
     }
     if let Some(a) = &files.alerts {
         outln!(
-            "alerts: {} STATUSTEXT queued for sending, {} dropped by the rate limit; {} frames found no planner to send to (none connected yet, or the link failed)",
+            "alerts: {} STATUSTEXT queued for sending, {} dropped by the rate limit; {} frames found no planner to send to (none connected yet, or the link failed; a udpout target that is not listening cannot be told apart from one that is)",
             a.texts_sent,
             a.texts_dropped,
             a.frames_unsent

@@ -644,13 +644,21 @@ impl VehiclePipeline {
         let dt = median_interval(samples.iter().map(|s| s.t));
         let l = profile.actuators.len();
         let mut profile = profile;
-        // a_z is measured only if the vehicle sends an IMU with (nearly) every sample.
+        // a_z is measured if the vehicle sends an IMU with most samples; those without it are
+        // left out and counted (a link that lost one RAW_IMU in ten or more used to switch the whole
+        // run to rates only, leaving a multirotor's thrust direction unobserved).
         let with_az = samples.iter().filter(|s| s.az.is_some()).count();
-        if profile.model.measure_az && with_az * 10 < samples.len() * 9 {
-            sink.message(
-                self.sysid,
-                "no IMU acceleration with the rates (HIGHRES_IMU / SCALED_IMU / RAW_IMU); estimating from rates only",
-            );
+        if profile.model.measure_az && with_az * 2 < samples.len() {
+            let why = if with_az == 0 {
+                "no IMU acceleration with the rates (HIGHRES_IMU / SCALED_IMU / RAW_IMU)"
+                    .to_string()
+            } else {
+                format!(
+                    "IMU acceleration with only {with_az} of {} calibration samples",
+                    samples.len()
+                )
+            };
+            sink.message(self.sysid, &format!("{why}; estimating from rates only"));
             profile.model.measure_az = false;
         }
         // An identified model predicts the rates only: a static a_z row cannot follow a

@@ -632,3 +632,56 @@ fn sim_warns_of_a_fault_in_the_monitors_calibration_stretch() {
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("warning"), "{err}");
 }
+
+/// The records of a .tlog (8-byte time, then one MAVLink v1 or v2 frame) as (start, msgid).
+fn tlog_records(log: &[u8]) -> Vec<(std::ops::Range<usize>, u32)> {
+    let mut at = 0;
+    let mut out = vec![];
+    while at + 8 + 10 <= log.len() {
+        let f = &log[at + 8..];
+        let (len, id) = match f[0] {
+            0xFE => (6 + f[1] as usize + 2, u32::from(f[5])),
+            0xFD => (
+                10 + f[1] as usize + 2 + if f[2] & 1 == 1 { 13 } else { 0 },
+                u32::from(f[7]) | u32::from(f[8]) << 8 | u32::from(f[9]) << 16,
+            ),
+            m => panic!("no frame at {at}: {m:#x}"),
+        };
+        out.push((at..at + 8 + len, id));
+        at += 8 + len;
+    }
+    out
+}
+
+/// A link that loses one RAW_IMU in five keeps a_z (the samples without it are counted), rather
+/// than switching the whole run to rates only.
+#[test]
+fn a_lossy_imu_keeps_a_z() {
+    let src = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let log = std::fs::read(&src).unwrap();
+    let mut kept = Vec::with_capacity(log.len());
+    let mut imu = 0;
+    for (range, id) in tlog_records(&log) {
+        if id == 27 {
+            imu += 1;
+            if imu % 5 == 0 {
+                continue;
+            }
+        }
+        kept.extend_from_slice(&log[range]);
+    }
+    assert!(imu > 1000, "{imu} RAW_IMU");
+    let dir = common::temp_dir("cli_lossy_imu");
+    let lossy = dir.join("lossy.tlog");
+    std::fs::write(&lossy, kept).unwrap();
+    let (code, out, err) = ahcmon(&["replay", lossy.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("rates only"), "{err}");
+    let without: u64 = out
+        .split("samples without a_z")
+        .next()
+        .and_then(|s| s.rsplit(", ").next())
+        .and_then(|n| n.trim().parse().ok())
+        .expect("the summary counts samples without a_z");
+    assert!(without > 50, "{out}");
+}
