@@ -336,6 +336,8 @@ pub struct Diagnoser {
 /// Residuals kept for the change test (s), and the shortest changed stretch it fits (s).
 const CHANGE_HORIZON_S: f64 = 6.0;
 const CHANGE_MIN_S: f64 = 0.2;
+/// Longest hole in the telemetry the stored residuals are kept across (s).
+const MAX_HOLE_S: f64 = 1.0;
 /// At most this many residuals are kept, whatever the rate (the test's cost is linear in it).
 const CHANGE_MAX_SAMPLES: usize = 600;
 
@@ -432,9 +434,20 @@ impl Diagnoser {
         self.change.push(t, residual, u);
     }
 
-    /// The telemetry has a hole (or the vehicle restarted): residuals across it mean nothing.
+    /// A new flight or a restart: the stored residuals belong to another one.
     pub fn residual_gap(&mut self) {
         self.change.clear();
+    }
+
+    /// Samples were lost over `span` seconds. The residuals on either side of a short hole are
+    /// still one-step residuals of the same flight and stay (a link that loses one sample in
+    /// ten used to clear the store every ten samples, so the change test never filled its
+    /// shortest stretch and its isolation was off); after a longer outage the vehicle did
+    /// what nobody saw, and the test starts afresh.
+    pub fn samples_lost(&mut self, span: f64) {
+        if span.is_nan() || span > MAX_HOLE_S {
+            self.change.clear();
+        }
     }
 
     /// The change test's last reading (`None` while nothing is under way).
