@@ -27,6 +27,8 @@ impl Monitor {
         self.samples.clear();
         self.assembler
             .on_frame(frame.sysid, frame.compid, &frame.msg, &mut self.samples);
+        self.assembler
+            .on_sequence(frame.sysid, frame.compid, frame.seq);
         self.run(frame.sysid, sink);
     }
 

@@ -786,4 +786,9 @@ fn a_lossy_imu_calibrates_the_rates_as_the_whole_stream_does() {
     assert_eq!(full.len(), 3, "{full:?}");
     assert_eq!(with_holes, full);
     assert!(summary.contains("samples without a_z"), "{summary}");
+    // The frames dropped are counted from the sequence numbers.
+    assert!(
+        summary.contains(&format!("{} frames lost on the link", imu / 10)),
+        "{summary}"
+    );
 }

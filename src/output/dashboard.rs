@@ -150,7 +150,13 @@ pub fn render(
     actuator_table(f, rows[1], monitor, decisions, sysid, ui);
     chart(f, rows[2], monitor, history, sysid, ui);
     decision_list(f, rows[3], decisions, sysid);
-    footer(f, rows[4], link, ui);
+    let lost: u64 = monitor
+        .assembler
+        .vehicles
+        .values()
+        .map(|v| v.counters.lost_frames)
+        .sum();
+    footer(f, rows[4], link, lost, ui);
     if ui.help {
         help(f, area);
     }
@@ -435,7 +441,8 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
     );
 }
 
-fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, ui: &UiState) {
+/// `lost`: the vehicles' frames their sequence numbers say never arrived.
+fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, lost: u64, ui: &UiState) {
     let state = if link.ended {
         Span::styled(
             " END OF LOG ",
@@ -463,7 +470,7 @@ fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, ui: &UiState) {
         .data_age_s
         .map_or("-".to_string(), |a| format!("{a:.1} s"));
     let text = format!(
-        " {} · {:.0} msg/s · age {age} · drops crc {} resync {} unknown {} · {}",
+        " {} · {:.0} msg/s · age {age} · lost {lost} · bad crc {} resync {} unknown {} · {}",
         link.name,
         link.rate_hz,
         c.bad_crc,
@@ -472,7 +479,7 @@ fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, ui: &UiState) {
         if ui.paused {
             "p resume"
         } else {
-            "?: help  q: quit"
+            "?: help q: quit"
         }
     );
     f.render_widget(

@@ -42,7 +42,7 @@ pub fn render(
         let c = &v.counters;
         let _ = writeln!(
             s,
-            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} samples dropped at them), {} non-finite",
+            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} samples dropped at them), {} non-finite; {} frames lost on the link (sequence numbers)",
             v.info
                 .mav_type
                 .map_or("unknown".to_string(), |t| format!("{t:?}")
@@ -54,7 +54,8 @@ pub fn render(
             c.duplicates,
             c.reboots,
             c.dropped_at_reboot,
-            c.non_finite
+            c.non_finite,
+            c.lost_frames
         );
         let Some(p) = monitor.pipelines.get(sysid) else {
             let _ = writeln!(

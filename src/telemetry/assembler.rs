@@ -52,6 +52,9 @@ pub struct TelemetryCounters {
     /// Samples still waiting for their a_z when the vehicle rebooted: dropped, not fed to the
     /// new boot's filters.
     pub dropped_at_reboot: u64,
+    /// Frames of the autopilot its sequence numbers say never arrived: lost on the link (or
+    /// before the log began recording them). A frame that arrives late is taken off again.
+    pub lost_frames: u64,
     /// Messages with NaN / inf in the fields we use.
     pub non_finite: u64,
     /// Rate (ATTITUDE) and output (SERVO_OUTPUT_RAW port 0, ACTUATOR_OUTPUT_STATUS) messages
@@ -131,6 +134,9 @@ pub struct VehicleAssembler {
     /// neighbour's.
     rate_period: Option<f64>,
     pending: Option<TelemetrySample>,
+    /// The autopilot's newest frame sequence number, and which of the 64 before it arrived
+    /// (bit i: sequence number `newest - i`).
+    seq: Option<(u8, u64)>,
 }
 
 /// Where a_z comes from: one message type per run (see `VehicleAssembler::on_az`), in order
@@ -184,6 +190,7 @@ impl VehicleAssembler {
             has_imu: false,
             rate_period: None,
             pending: None,
+            seq: None,
         }
     }
 
@@ -235,8 +242,37 @@ impl VehicleAssembler {
         self.az_interval = None;
         self.az_last = [None; 4];
         self.last_sample_t = None;
+        self.seq = None;
         self.clock = Some(t);
         true
+    }
+
+    /// Count the frames the autopilot's sequence numbers (one counter per sender, wrapping at
+    /// 256) skipped. A number up to 127 ahead of the newest is a jump over lost frames; one
+    /// up to 63 behind a late frame, taken off the count unless it already came (a duplicate).
+    pub fn on_sequence(&mut self, compid: u8, seq: u8) {
+        if !self.is_autopilot_component(compid) {
+            return;
+        }
+        let Some((newest, seen)) = self.seq else {
+            self.seq = Some((seq, 1));
+            return;
+        };
+        let ahead = seq.wrapping_sub(newest);
+        if ahead == 0 {
+            return;
+        }
+        if ahead < 128 {
+            self.counters.lost_frames += u64::from(ahead - 1);
+            let seen = if ahead < 64 { seen << ahead | 1 } else { 1 };
+            self.seq = Some((seq, seen));
+            return;
+        }
+        let behind = newest.wrapping_sub(seq);
+        if behind < 64 && seen & (1 << behind) == 0 {
+            self.counters.lost_frames = self.counters.lost_frames.saturating_sub(1);
+            self.seq = Some((newest, seen | 1 << behind));
+        }
     }
 
     /// Feed one message; complete instants are appended to `out` (in time order).
@@ -573,6 +609,14 @@ impl Assembler {
             v.on_message(compid, msg, out);
         }
     }
+
+    /// A frame's sequence number, for a vehicle already seen (see
+    /// [`VehicleAssembler::on_sequence`]).
+    pub fn on_sequence(&mut self, sysid: u8, compid: u8, seq: u8) {
+        if let Some(v) = self.vehicles.get_mut(&sysid) {
+            v.on_sequence(compid, seq);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -822,5 +866,23 @@ mod tests {
         assert_eq!(a.counters.reboots, 0);
         assert_eq!(a.counters.samples, 100);
         assert_eq!(a.counters.out_of_order, 20);
+    }
+
+    #[test]
+    fn sequence_numbers_count_lost_frames_across_the_wrap_and_take_late_ones_off() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut feed = |seqs: &[u8]| {
+            for &s in seqs {
+                a.on_sequence(1, s);
+            }
+            a.counters.lost_frames
+        };
+        // 253, 254 lost; the wrap from 255 to 0 loses nothing.
+        assert_eq!(feed(&[250, 251, 252, 255, 0, 1]), 2);
+        // A duplicate is no loss; a late frame (5 after 7) is taken off, its duplicate not.
+        assert_eq!(feed(&[1, 3, 4, 7, 5, 5]), 2 + 1 + 2 - 1);
+        // Another component's counter is not the autopilot's.
+        a.on_sequence(2, 100);
+        assert_eq!(a.counters.lost_frames, 4);
     }
 }
