@@ -350,11 +350,12 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
 /// The monitor on udpin beside a stand-in autopilot; returns what the autopilot received and
 /// the monitor's stderr.
 fn vehicle_hears(extra: &[&str]) -> (Value, String) {
-    vehicle_hears_as(extra, "3")
+    vehicle_hears_as(extra, &["4", "3"])
 }
 
-/// As `vehicle_hears`, from an autopilot of the given MAV_AUTOPILOT (3 ArduPilot, 12 PX4).
-fn vehicle_hears_as(extra: &[&str], autopilot: &str) -> (Value, String) {
+/// As `vehicle_hears`, from an autopilot run with `vehicle`'s arguments: seconds, MAV_AUTOPILOT
+/// (3 ArduPilot, 12 PX4), and "noack" for one that never acknowledges.
+fn vehicle_hears_as(extra: &[&str], vehicle: &[&str]) -> (Value, String) {
     let port = free_udp_port();
     let monitor = Command::new(bin())
         .args([
@@ -370,12 +371,10 @@ fn vehicle_hears_as(extra: &[&str], autopilot: &str) -> (Value, String) {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(300));
-    let vehicle = common::run_python(&[
-        "tests/reference/fake_vehicle.py",
-        &port.to_string(),
-        "4",
-        autopilot,
-    ]);
+    let port = port.to_string();
+    let mut args = vec!["tests/reference/fake_vehicle.py", port.as_str()];
+    args.extend_from_slice(vehicle);
+    let vehicle = common::run_python(&args);
     let out = monitor.wait_with_output().unwrap();
     assert!(
         out.status.success(),
@@ -417,7 +416,7 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
     );
 
     // PX4's RAW_IMU is in sensor units, which the monitor does not read: it asks for HIGHRES_IMU.
-    let (heard, stderr) = vehicle_hears_as(&["--request-rates", "25"], "12");
+    let (heard, stderr) = vehicle_hears_as(&["--request-rates", "25"], &["4", "12"]);
     let mut ids: Vec<u32> = heard
         .as_array()
         .unwrap()
@@ -427,6 +426,20 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
     ids.sort();
     assert_eq!(ids, vec![30, 36, 105], "{heard}");
     assert!(stderr.contains("HIGHRES_IMU at 25 Hz"), "{stderr}");
+
+    // An autopilot that never acknowledges (or a one-way link) is said, with the rates
+    // achieved: none of the asked messages came from this stand-in.
+    let (heard, stderr) = vehicle_hears_as(&["--request-rates", "25"], &["6.5", "3", "noack"]);
+    assert_eq!(heard.as_array().unwrap().len(), 3, "{heard}");
+    assert!(
+        !stderr.contains("COMMAND_ACK SET_MESSAGE_INTERVAL"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("3 of 3 requests got no COMMAND_ACK"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("ATTITUDE 0.0 Hz"), "{stderr}");
 }
 
 /// The serial transport through a real pseudo-terminal (tests/reference/serial_feeder.py writes

@@ -218,11 +218,50 @@ const RATE_WINDOW: Duration = Duration::from_secs(5);
 /// after its first heartbeat; then its COMMAND_ACKs and the rates achieved are reported.
 #[derive(Default)]
 struct RateRequests {
-    /// sysid → (when requested, acks seen, frames of each needed message since, reported,
-    /// the messages asked for).
-    #[allow(clippy::type_complexity)]
-    asked: BTreeMap<u8, (Instant, u32, [u64; 3], bool, [(u32, &'static str); 3])>,
+    asked: BTreeMap<u8, Asked>,
     seq: u8,
+}
+
+/// What was asked of one vehicle and what came of it.
+struct Asked {
+    since: Instant,
+    acks: u32,
+    /// Frames of each needed message since the request.
+    counts: [u64; 3],
+    reported: bool,
+    messages: [(u32, &'static str); 3],
+    /// Vehicle time (s) of the first and the latest ATTITUDE since the request: the rates are
+    /// per vehicle second, so a simulator sent at `--speed` is not reported at its wall rate.
+    vehicle_span: Option<(f64, f64)>,
+}
+
+impl Asked {
+    /// The achieved rates' report, and what to say about missing acknowledgements.
+    fn report(&self, hz: f64) -> String {
+        let wall = self.since.elapsed().as_secs_f64();
+        let (span, clock) = match self.vehicle_span {
+            Some((a, b)) if b > a => (b - a, "vehicle"),
+            _ => (wall, "wall-clock"),
+        };
+        let achieved: Vec<String> = self
+            .messages
+            .iter()
+            .zip(self.counts.iter())
+            .map(|((_, name), n)| format!("{name} {:.1} Hz", *n as f64 / span))
+            .collect();
+        let mut text = format!(
+            "rates achieved (requested {hz} Hz, over {span:.1} s of {clock} time): {}",
+            achieved.join(", ")
+        );
+        let asked = self.messages.len() as u32;
+        if self.acks < asked {
+            text.push_str(&format!(
+                "; warning: {} of {asked} requests got no COMMAND_ACK in {wall:.0} s (the link may be one-way, or the autopilot ignores SET_MESSAGE_INTERVAL)",
+                asked - self.acks
+            ));
+        }
+        text
+    }
 }
 
 impl RateRequests {
@@ -238,39 +277,33 @@ impl RateRequests {
         };
         let mut out = vec![];
         let sysid = frame.sysid;
-        if let Some((since, acks, counts, reported, asked)) = self.asked.get_mut(&sysid) {
-            if let MavMessage::COMMAND_ACK(a) = &frame.msg
-                && a.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
-            {
-                *acks += 1;
-                sink.message(
-                    sysid,
-                    &format!(
-                        "COMMAND_ACK SET_MESSAGE_INTERVAL {}/3: {:?}",
-                        acks, a.result
-                    ),
-                );
+        if let Some(a) = self.asked.get_mut(&sysid) {
+            match &frame.msg {
+                MavMessage::COMMAND_ACK(ack)
+                    if ack.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL =>
+                {
+                    a.acks += 1;
+                    sink.message(
+                        sysid,
+                        &format!(
+                            "COMMAND_ACK SET_MESSAGE_INTERVAL {}/3: {:?}",
+                            a.acks, ack.result
+                        ),
+                    );
+                }
+                MavMessage::ATTITUDE(att) => {
+                    let t = f64::from(att.time_boot_ms) * 1e-3;
+                    let first = a.vehicle_span.map_or(t, |(first, _)| first);
+                    a.vehicle_span = Some((first, t));
+                }
+                _ => {}
             }
-            if let Some(k) = asked.iter().position(|(id, _)| *id == frame.msg_id) {
-                counts[k] += 1;
+            if let Some(k) = a.messages.iter().position(|(id, _)| *id == frame.msg_id) {
+                a.counts[k] += 1;
             }
-            let elapsed = since.elapsed();
-            if !*reported && elapsed >= RATE_WINDOW {
-                *reported = true;
-                let achieved: Vec<String> = asked
-                    .iter()
-                    .zip(counts.iter())
-                    .map(|((_, name), n)| {
-                        format!("{name} {:.1} Hz", *n as f64 / elapsed.as_secs_f64())
-                    })
-                    .collect();
-                sink.message(
-                    sysid,
-                    &format!(
-                        "rates achieved (requested {hz} Hz): {}",
-                        achieved.join(", ")
-                    ),
-                );
+            if !a.reported && a.since.elapsed() >= RATE_WINDOW {
+                a.reported = true;
+                sink.message(sysid, &a.report(hz));
             }
             return out;
         }
@@ -326,8 +359,17 @@ impl RateRequests {
                 names.join(", ")
             ),
         );
-        self.asked
-            .insert(sysid, (Instant::now(), 0, [0; 3], false, asked));
+        self.asked.insert(
+            sysid,
+            Asked {
+                since: Instant::now(),
+                acks: 0,
+                counts: [0; 3],
+                reported: false,
+                messages: asked,
+                vehicle_span: None,
+            },
+        );
         out
     }
 }

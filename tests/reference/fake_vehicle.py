@@ -1,7 +1,7 @@
 """A stand-in autopilot (pymavlink): sends HEARTBEAT (quadrotor; ArduPilot, or the
 MAV_AUTOPILOT given as the third argument, e.g. 12 for PX4) to the monitor's udpin port for a
-few seconds, answers COMMAND_LONG with COMMAND_ACK (accepted), and prints as JSON everything the
-monitor sent it."""
+few seconds, answers COMMAND_LONG with COMMAND_ACK (accepted; not at all with "noack" as the
+fourth argument), and prints as JSON everything the monitor sent it."""
 import json
 import sys
 import time
@@ -10,6 +10,7 @@ from pymavlink import mavutil
 
 port, secs = int(sys.argv[1]), float(sys.argv[2])
 autopilot = int(sys.argv[3]) if len(sys.argv) > 3 else 3
+ack = not (len(sys.argv) > 4 and sys.argv[4] == "noack")
 m = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
 got = []
 end = time.time() + secs
@@ -30,6 +31,7 @@ while time.time() < end:
             param2=msg.param2,
             target=[msg.target_system, msg.target_component],
         )
-        m.mav.command_ack_send(msg.command, 0)
+        if ack:
+            m.mav.command_ack_send(msg.command, 0)
     got.append(d)
 print(json.dumps(got))
