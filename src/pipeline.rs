@@ -679,6 +679,9 @@ impl VehiclePipeline {
         let measure_az = profile.model.measure_az;
         let mut shifted: Vec<CalibrationSample> = Vec::with_capacity(samples.len());
         let (mut kept_previous, mut gaps) = (false, 0u64);
+        // Each kept sample's position in periods: one after a kept predecessor, else as many as
+        // passed (rounded, at least one).
+        let mut last_kept: Option<(f64, u64)> = None;
         for w in samples.windows(2) {
             let interval = w[1].t - w[0].t;
             let regular = interval > 0.0 && interval <= CALIBRATION_MAX_INTERVAL * dt;
@@ -687,11 +690,18 @@ impl VehiclePipeline {
             let keep = regular;
             self.counters.missing_az += u64::from(regular && measure_az && az.is_none());
             if keep {
+                let step = match last_kept {
+                    None => 0,
+                    Some((_, step)) if kept_previous => step + 1,
+                    Some((t, step)) => step + (((w[1].t - t) / dt).round() as u64).max(1),
+                };
+                last_kept = Some((w[1].t, step));
                 shifted.push(CalibrationSample {
                     rates: w[1].rates,
                     u: &w[0].u[..l],
                     az,
                     follows_previous: kept_previous,
+                    step,
                 });
             }
             kept_previous = keep;
