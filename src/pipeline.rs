@@ -140,6 +140,11 @@ pub struct PipelineCounters {
     pub decisions: u64,
 }
 
+/// Vehicle seconds since boot after which a first sample already airborne means the monitor
+/// joined a flight under way (a real vehicle spends longer than this on the ground between
+/// boot and take-off; a simulator starts airborne at boot).
+const JOINED_IN_FLIGHT_S: f64 = 30.0;
+
 pub struct VehiclePipeline {
     pub sysid: u8,
     cfg: PipelineConfig,
@@ -158,6 +163,8 @@ pub struct VehiclePipeline {
     pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
     /// Vehicle time of the last sample seen (any stage).
     pub last_sample_t: Option<f64>,
+    /// A sample on the ground (or disarmed) has been seen: the take-off was watched.
+    seen_grounded: bool,
     /// Actuators with a fault in force, by index.
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
     /// Said once that an output channel carries no PWM.
@@ -212,6 +219,7 @@ impl VehiclePipeline {
             warned: std::collections::BTreeSet::new(),
             last: None,
             last_sample_t: None,
+            seen_grounded: false,
             active: [None; MAX_ACTUATORS],
             warned_missing_output: false,
             failure: None,
@@ -412,6 +420,10 @@ impl VehiclePipeline {
         self.last_sample_t = Some(s.t);
         let airborne = self.airborne(s);
         if !airborne {
+            // Known to be on the ground: disarmed by its heartbeat, or armed at a known low
+            // height (not merely not armed long enough, or before the first heartbeat).
+            let low = s.rel_alt.is_some_and(|h| h <= self.cfg.airborne_alt_m);
+            self.seen_grounded |= info.mav_type.is_some() && (!s.armed || low);
             self.airborne_since = None;
             match &mut self.stage {
                 Stage::Calibrating { .. } => {
@@ -463,6 +475,20 @@ impl VehiclePipeline {
                                 d.source
                             ),
                         );
+                        // Joined a flight under way (a vehicle up for a while, and no sample
+                        // on the ground): whatever it flies with now is taken as healthy. A
+                        // simulator's flight starts airborne at boot, and is not warned about.
+                        if !self.seen_grounded
+                            && since >= JOINED_IN_FLIGHT_S
+                            && self.warned.insert("joined in flight".into())
+                        {
+                            sink.message(
+                                self.sysid,
+                                &format!(
+                                    "warning: joined in flight (the first data, at t={since:.0} s since boot, were airborne): the calibration takes the next stretch as healthy, so a fault already present is calibrated in and not seen; start the monitor before take-off to watch the whole flight"
+                                ),
+                            );
+                        }
                         self.stage = Stage::Calibrating {
                             profile: Box::new(d.profile.clone()),
                             samples: Vec::with_capacity(2048),

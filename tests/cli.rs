@@ -792,3 +792,35 @@ fn a_lossy_imu_calibrates_the_rates_as_the_whole_stream_does() {
         "{summary}"
     );
 }
+
+/// A log that begins in the air, long after boot (the monitor joined a flight under way), is
+/// warned about: its calibration takes whatever the vehicle flies with as healthy. The whole
+/// log, which watched the take-off, is not.
+#[test]
+fn joining_a_flight_under_way_is_warned_about() {
+    let src = common::data(
+        "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+    );
+    let log = std::fs::read(&src).unwrap();
+    let stamp = |r: &std::ops::Range<usize>| {
+        u64::from_be_bytes(log[r.start..r.start + 8].try_into().unwrap())
+    };
+    let records = tlog_records(&log);
+    let first = stamp(&records[0].0);
+    // From 80 s into the log: airborne since about 58 s of vehicle time.
+    let mut joined = Vec::new();
+    for (range, _) in records
+        .iter()
+        .filter(|(r, _)| stamp(r) >= first + 80_000_000)
+    {
+        joined.extend_from_slice(&log[range.clone()]);
+    }
+    let path = common::temp_dir("cli_joined").join("joined.tlog");
+    std::fs::write(&path, joined).unwrap();
+    let (code, _, err) = ahcmon(&["replay", path.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("warning: joined in flight"), "{err}");
+    let (code, _, err) = ahcmon(&["replay", src.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("joined in flight"), "{err}");
+}
