@@ -3,7 +3,8 @@
 mod common;
 
 use ahcmon::eval::run_scenario;
-use ahcmon::model::calibrate::{CalibrationSample, calibrate, calibrate_scaled};
+use ahcmon::model::RateParams;
+use ahcmon::model::calibrate::{CalibrationSample, ScaledFit, calibrate, calibrate_scaled};
 use ahcmon::scenario::resolve;
 use ahcmon::sim::vehicle::{Gusts, ModelMismatch, VehicleSim, VehicleSimConfig};
 use ahcmon::telemetry::Profile;
@@ -416,17 +417,15 @@ fn calibration_leaves_out_the_steps_across_gaps() {
     );
 }
 
-/// The in-flight calibration (`calibrate_scaled`, what the live pipeline runs) in the gusts of
-/// the healthy-flight scenarios. The autopilot reacts to what the wind did, so commands and
-/// rates are correlated with the wind's next push, which a plain fit mistakes for weaker
-/// actuators and less damping (x0.59-0.81 against a true 0.9 on roll and pitch, damping 10-30 %
-/// low, measured on these flights before the wind was modelled). With the wind modelled as a
-/// first-order disturbance, roll and pitch over 60 s land at a mean error of about 1.5 % (every
-/// one within 10 %), the damping within a few %. Yaw, weakly damped, stays noisy (factor
-/// 0.84-0.94, damping 0.5-2 against 1.1 and 1.65): not asserted.
-#[test]
-fn in_flight_calibration_is_not_fooled_by_gusts() {
-    let (mut scale_err, mut damping_err, mut count) = (0.0, 0.0, 0.0);
+/// The gusty healthy flights the in-flight calibration tests fit: quad X and plane, seeds 1-3,
+/// 10 % model mismatch (true factor 0.9), 60 s after the first 10. For each flight, its name,
+/// seed, the true parameters and `calibrate_scaled`'s fit on the samples `lost` leaves (a lost
+/// sample's successor has no outputs of the previous instant to pair with, as in the pipeline,
+/// and goes too).
+fn gusty_calibrations(
+    lost: impl Fn(usize) -> bool,
+) -> Vec<(&'static str, u64, RateParams, ScaledFit)> {
+    let mut out = vec![];
     for name in ["quad-x", "plane"] {
         let profile = Profile::resolve(name).unwrap();
         let base = profile.rate_params();
@@ -447,44 +446,62 @@ fn in_flight_calibration_is_not_fooled_by_gusts() {
             };
             let mut sim = VehicleSim::new(cfg).unwrap();
             let l = profile.actuators.len();
-            // 60 s after the first 10.
             let samples: Vec<_> = (0..3500).map(|_| sim.step()).skip(500).collect();
+            let gone = |k: usize| lost(k) || (k > 0 && lost(k - 1));
             // A simulator sample holds the outputs applied over its step and the rates at its
             // end, which is what a calibration sample is.
             let cal: Vec<CalibrationSample> = samples
                 .iter()
                 .enumerate()
+                .filter(|(k, _)| !gone(*k))
                 .map(|(k, s)| CalibrationSample {
                     rates: [s.y[0], s.y[1], s.y[2]],
                     u: &s.u[..l],
                     az: None,
-                    follows_previous: true,
+                    follows_previous: !(k > 0 && gone(k - 1)),
                     step: k as u64,
                 })
                 .collect();
             let fit = calibrate_scaled(&cal, 0.02, &base).unwrap();
-            for axis in 0..2 {
-                assert!(
-                    fit.scaled[axis],
-                    "{name} seed {seed}: axis {axis} not excited"
-                );
-                let scale = (fit.scale[axis] - 0.9).abs() / 0.9;
-                let d = fit.params.damping[axis];
-                let damping = (d - truth.damping[axis]).abs() / truth.damping[axis];
-                println!(
-                    "{name} seed {seed} axis {axis}: x{:.3}, D {d:.3}",
-                    fit.scale[axis]
-                );
-                assert!(
-                    scale < 0.1,
-                    "{name} seed {seed} axis {axis}: x{}",
-                    fit.scale[axis]
-                );
-                assert!(damping < 0.15, "{name} seed {seed} axis {axis}: D {d}");
-                scale_err += scale;
-                damping_err += damping;
-                count += 1.0;
-            }
+            out.push((name, seed, truth.clone(), fit));
+        }
+    }
+    out
+}
+
+/// The in-flight calibration (`calibrate_scaled`, what the live pipeline runs) in the gusts of
+/// the healthy-flight scenarios. The autopilot reacts to what the wind did, so commands and
+/// rates are correlated with the wind's next push, which a plain fit mistakes for weaker
+/// actuators and less damping (x0.59-0.81 against a true 0.9 on roll and pitch, damping 10-30 %
+/// low, measured on these flights before the wind was modelled). With the wind modelled as a
+/// first-order disturbance, roll and pitch over 60 s land at a mean error of about 1.5 % (every
+/// one within 10 %), the damping within a few %. Yaw, weakly damped, stays noisy (factor
+/// 0.84-0.94, damping 0.5-2 against 1.1 and 1.65): not asserted.
+#[test]
+fn in_flight_calibration_is_not_fooled_by_gusts() {
+    let (mut scale_err, mut damping_err, mut count) = (0.0, 0.0, 0.0);
+    for (name, seed, truth, fit) in gusty_calibrations(|_| false) {
+        for axis in 0..2 {
+            assert!(
+                fit.scaled[axis],
+                "{name} seed {seed}: axis {axis} not excited"
+            );
+            let scale = (fit.scale[axis] - 0.9).abs() / 0.9;
+            let d = fit.params.damping[axis];
+            let damping = (d - truth.damping[axis]).abs() / truth.damping[axis];
+            println!(
+                "{name} seed {seed} axis {axis}: x{:.3}, D {d:.3}",
+                fit.scale[axis]
+            );
+            assert!(
+                scale < 0.1,
+                "{name} seed {seed} axis {axis}: x{}",
+                fit.scale[axis]
+            );
+            assert!(damping < 0.15, "{name} seed {seed} axis {axis}: D {d}");
+            scale_err += scale;
+            damping_err += damping;
+            count += 1.0;
         }
     }
     let (scale_err, damping_err) = (scale_err / count, damping_err / count);
@@ -494,64 +511,26 @@ fn in_flight_calibration_is_not_fooled_by_gusts() {
 }
 
 /// As [`in_flight_calibration_is_not_fooled_by_gusts`], over a link that loses one sample in
-/// ten (the hole's step and the one after it are left out, as the pipeline does). Six fit rows
-/// in ten remain; the wind-modelled fit differences across the holes, so it keeps all six. It
-/// used to keep the three with three consecutive rows before them: its standard error
-/// doubled, the Hausman-style choice fell back to the gust-biased plain fit (x0.61-0.69 where
-/// the truth is x0.9) and the factors were 13.2 % off on average. Measured now: 5.1 % (ten of
-/// the twelve within 0.05 of the truth; plane roll x0.67 on seed 2 and x1.07 on seed 3); the
-/// whole stream: 1.6 %. The bound sits between the two.
+/// ten. Six fit rows in ten remain; the wind-modelled fit differences across the holes, so it
+/// keeps all six. It used to keep the three with three consecutive rows before them: its
+/// standard error doubled, the Hausman-style choice fell back to the gust-biased plain fit
+/// (x0.61-0.69 where the truth is x0.9) and the factors were 13.2 % off on average. Measured
+/// now: 5.1 % (ten of the twelve within 0.05 of the truth; plane roll x0.67 on seed 2 and x1.07
+/// on seed 3); the whole stream: 1.6 %. The bound sits between the two.
 #[test]
 fn in_flight_calibration_over_a_lossy_link_is_not_fooled_by_gusts() {
-    let (mut scale_err, mut count) = (0.0, 0.0);
-    for name in ["quad-x", "plane"] {
-        let profile = Profile::resolve(name).unwrap();
-        let base = profile.rate_params();
-        let mismatch = ModelMismatch {
-            damping: 1.1,
-            effectiveness: 0.9,
-        };
-        for seed in 1..=3 {
-            let cfg = VehicleSimConfig {
-                mismatch,
-                gusts: Some(Gusts {
-                    angular: [0.5, 0.5, 0.15],
-                    vertical: 0.3,
-                    tau_s: 1.0,
-                }),
-                ..VehicleSimConfig::calm(profile.clone(), 0.02, seed)
-            };
-            let mut sim = VehicleSim::new(cfg).unwrap();
-            let l = profile.actuators.len();
-            let samples: Vec<_> = (0..3500).map(|_| sim.step()).skip(500).collect();
-            // Sample k is lost when k % 10 == 9; the one after it then has no outputs of the
-            // previous instant to pair with (the pipeline drops that pair), so it goes too.
-            let lost = |k: usize| k % 10 == 9 || (k > 0 && (k - 1) % 10 == 9);
-            let cal: Vec<CalibrationSample> = samples
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| !lost(*k))
-                .map(|(k, s)| CalibrationSample {
-                    rates: [s.y[0], s.y[1], s.y[2]],
-                    u: &s.u[..l],
-                    az: None,
-                    follows_previous: !(k > 0 && lost(k - 1)),
-                    step: k as u64,
-                })
-                .collect();
-            let fit = calibrate_scaled(&cal, 0.02, &base).unwrap();
-            for axis in 0..2 {
-                let scale = (fit.scale[axis] - 0.9).abs() / 0.9;
-                println!(
-                    "lossy {name} seed {seed} axis {axis}: x{:.3}, D {:.3}",
-                    fit.scale[axis], fit.params.damping[axis]
-                );
-                scale_err += scale;
-                count += 1.0;
-            }
+    let fits = gusty_calibrations(|k| k % 10 == 9);
+    let mut scale_err = 0.0;
+    for (name, seed, _, fit) in &fits {
+        for axis in 0..2 {
+            println!(
+                "lossy {name} seed {seed} axis {axis}: x{:.3}, D {:.3}",
+                fit.scale[axis], fit.params.damping[axis]
+            );
+            scale_err += (fit.scale[axis] - 0.9).abs() / 0.9;
         }
     }
-    let scale_err = scale_err / count;
+    let scale_err = scale_err / (2 * fits.len()) as f64;
     println!("lossy mean relative error: factor {scale_err:.4}");
     assert!(scale_err < 0.07, "mean factor error {scale_err}");
 }
