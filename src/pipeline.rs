@@ -144,6 +144,7 @@ pub struct PipelineCounters {
 /// joined a flight under way (a real vehicle spends longer than this on the ground between
 /// boot and take-off; a simulator starts airborne at boot).
 const JOINED_IN_FLIGHT_S: f64 = 30.0;
+const JOINED_WARNING: &str = "no take-off seen";
 
 pub struct VehiclePipeline {
     pub sysid: u8,
@@ -344,6 +345,9 @@ impl VehiclePipeline {
         self.armed_since = None;
         self.airborne_since = None;
         self.active = [None; MAX_ACTUATORS];
+        // The new boot's take-off is watched or not afresh.
+        self.seen_grounded = false;
+        self.warned.remove(JOINED_WARNING);
     }
 
     fn airborne(&mut self, s: &TelemetrySample) -> bool {
@@ -480,12 +484,20 @@ impl VehiclePipeline {
                         // simulator's flight starts airborne at boot, and is not warned about.
                         if !self.seen_grounded
                             && since >= JOINED_IN_FLIGHT_S
-                            && self.warned.insert("joined in flight".into())
+                            && self.warned.insert(JOINED_WARNING.into())
                         {
+                            // Without a height, armed long enough counts as airborne: the
+                            // vehicle may still be on the ground.
+                            let began = self.armed_since.unwrap_or(since);
+                            let how = if s.rel_alt.is_some() {
+                                "already airborne"
+                            } else {
+                                "already armed, with no height to tell the ground from the air"
+                            };
                             sink.message(
                                 self.sysid,
                                 &format!(
-                                    "warning: joined in flight (the first data, at t={since:.0} s since boot, were airborne): the calibration takes the next stretch as healthy, so a fault already present is calibrated in and not seen; start the monitor before take-off to watch the whole flight"
+                                    "warning: {JOINED_WARNING}: the vehicle was {how} when its data began ({began:.0} s after boot). The calibration takes the next stretch as healthy, so a fault already present is calibrated in and not seen; start the monitor before take-off to watch the whole flight"
                                 ),
                             );
                         }

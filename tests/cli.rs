@@ -678,6 +678,16 @@ fn lossy_copy(
     (lossy, seen)
 }
 
+/// The number the replay summary prints before `label` ("..., 12 samples without a_z").
+fn summary_count(summary: &str, label: &str) -> u64 {
+    summary
+        .split(label)
+        .next()
+        .and_then(|s| s.rsplit([',', ';']).next())
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("the summary counts {label}: {summary}"))
+}
+
 /// A link that loses one RAW_IMU in five keeps a_z (the samples without it are counted), rather
 /// than switching the whole run to rates only.
 #[test]
@@ -692,13 +702,7 @@ fn a_lossy_imu_keeps_a_z() {
     let (code, out, err) = ahcmon(&["replay", lossy.to_str().unwrap(), "--headless"]);
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("rates only"), "{err}");
-    let without: u64 = out
-        .split("samples without a_z")
-        .next()
-        .and_then(|s| s.rsplit(", ").next())
-        .and_then(|n| n.trim().parse().ok())
-        .expect("the summary counts samples without a_z");
-    assert!(without > 50, "{out}");
+    assert!(summary_count(&out, "samples without a_z") > 50, "{out}");
 }
 
 /// A link that loses one ATTITUDE in ten leaves a one-sample hole every ten samples. The change
@@ -726,7 +730,7 @@ fn a_lossy_attitude_stream_keeps_the_change_test() {
         decisions.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
-    assert!(out.contains("gaps"), "the summary counts the holes: {out}");
+    assert!(summary_count(&out, "gaps while estimating") > 400, "{out}");
     let faults: Vec<serde_json::Value> = std::fs::read_to_string(&decisions)
         .unwrap()
         .lines()
@@ -785,10 +789,16 @@ fn a_lossy_imu_calibrates_the_rates_as_the_whole_stream_does() {
     let (with_holes, summary) = factors(&lossy);
     assert_eq!(full.len(), 3, "{full:?}");
     assert_eq!(with_holes, full);
-    assert!(summary.contains("samples without a_z"), "{summary}");
+    assert!(
+        summary_count(&summary, "samples without a_z") > 100,
+        "{summary}"
+    );
     // The frames dropped are counted from the sequence numbers.
     assert!(
-        summary.contains(&format!("{} frames lost on the link", imu / 10)),
+        summary.contains(&format!(
+            "{} frames missing from the autopilot's sequence",
+            imu / 10
+        )),
         "{summary}"
     );
 }
@@ -819,8 +829,11 @@ fn joining_a_flight_under_way_is_warned_about() {
     std::fs::write(&path, joined).unwrap();
     let (code, _, err) = ahcmon(&["replay", path.to_str().unwrap(), "--headless"]);
     assert_eq!(code, 0, "{err}");
-    assert!(err.contains("warning: joined in flight"), "{err}");
+    assert!(
+        err.contains("warning: no take-off seen: the vehicle was already airborne"),
+        "{err}"
+    );
     let (code, _, err) = ahcmon(&["replay", src.to_str().unwrap(), "--headless"]);
     assert_eq!(code, 0, "{err}");
-    assert!(!err.contains("joined in flight"), "{err}");
+    assert!(!err.contains("no take-off seen"), "{err}");
 }

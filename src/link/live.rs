@@ -230,23 +230,25 @@ struct Asked {
     counts: [u64; 3],
     reported: bool,
     messages: [(u32, &'static str); 3],
-    /// Vehicle time (s) of the first and the latest ATTITUDE since the request: the rates are
-    /// per vehicle second, so a simulator sent at `--speed` is not reported at its wall rate.
+    /// Vehicle time (s) of the first and the latest ATTITUDE since the request, and the frames
+    /// of each needed message after that first ATTITUDE: the rates are per vehicle second, so
+    /// a simulator sent at `--speed` is not reported at its wall rate.
     vehicle_span: Option<(f64, f64)>,
+    vehicle_counts: [u64; 3],
 }
 
 impl Asked {
     /// The achieved rates' report, and what to say about missing acknowledgements.
     fn report(&self, hz: f64) -> String {
         let wall = self.since.elapsed().as_secs_f64();
-        let (span, clock) = match self.vehicle_span {
-            Some((a, b)) if b > a => (b - a, "vehicle"),
-            _ => (wall, "wall-clock"),
+        let (span, clock, counts) = match self.vehicle_span {
+            Some((a, b)) if b > a => (b - a, "vehicle", &self.vehicle_counts),
+            _ => (wall, "wall-clock", &self.counts),
         };
         let achieved: Vec<String> = self
             .messages
             .iter()
-            .zip(self.counts.iter())
+            .zip(counts.iter())
             .map(|((_, name), n)| format!("{name} {:.1} Hz", *n as f64 / span))
             .collect();
         let mut text = format!(
@@ -300,6 +302,11 @@ impl RateRequests {
             }
             if let Some(k) = a.messages.iter().position(|(id, _)| *id == frame.msg_id) {
                 a.counts[k] += 1;
+                // The first ATTITUDE opens the span; what comes after it falls within.
+                let opened = a.vehicle_span.is_some_and(|(first, last)| {
+                    !matches!(frame.msg, MavMessage::ATTITUDE(_)) || last > first
+                });
+                a.vehicle_counts[k] += u64::from(opened);
             }
             if !a.reported && a.since.elapsed() >= RATE_WINDOW {
                 a.reported = true;
@@ -368,6 +375,7 @@ impl RateRequests {
                 reported: false,
                 messages: asked,
                 vehicle_span: None,
+                vehicle_counts: [0; 3],
             },
         );
         out

@@ -52,8 +52,10 @@ pub struct TelemetryCounters {
     /// Samples still waiting for their a_z when the vehicle rebooted: dropped, not fed to the
     /// new boot's filters.
     pub dropped_at_reboot: u64,
-    /// Frames of the autopilot its sequence numbers say never arrived: lost on the link (or
-    /// before the log began recording them). A frame that arrives late is taken off again.
+    /// Frames of the autopilot its sequence numbers say never arrived intact: lost on the link,
+    /// dropped above as corrupt (bad CRC), or left out of the log. A frame that arrives late is
+    /// taken off again. An outage of 256 frames or more wraps the counter and is not seen, and
+    /// two links merged (each with its own counter) make the count meaningless.
     pub lost_frames: u64,
     /// Messages with NaN / inf in the fields we use.
     pub non_finite: u64,
@@ -137,6 +139,9 @@ pub struct VehicleAssembler {
     /// The autopilot's newest frame sequence number, and which of the 64 before it arrived
     /// (bit i: sequence number `newest - i`).
     seq: Option<(u8, u64)>,
+    /// `lost_frames` when the first message of a possible reboot came: a confirmed reboot
+    /// restarts the sequence, and what its jump counted is taken back.
+    lost_at_reboot_candidate: u64,
 }
 
 /// Where a_z comes from: one message type per run (see `VehicleAssembler::on_az`), in order
@@ -191,6 +196,7 @@ impl VehicleAssembler {
             rate_period: None,
             pending: None,
             seq: None,
+            lost_at_reboot_candidate: 0,
         }
     }
 
@@ -225,6 +231,9 @@ impl VehicleAssembler {
             .filter(|&first| (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t));
         if !first.is_some_and(|first| t - first >= REBOOT_HOLD_S) {
             // Not (yet) enough of the new clock: dropped and counted.
+            if first.is_none() {
+                self.lost_at_reboot_candidate = self.counters.lost_frames;
+            }
             self.reboot_candidate = Some(first.unwrap_or(t));
             self.counters.out_of_order += 1;
             return false;
@@ -243,36 +252,36 @@ impl VehicleAssembler {
         self.az_last = [None; 4];
         self.last_sample_t = None;
         self.seq = None;
+        self.counters.lost_frames = self.lost_at_reboot_candidate;
         self.clock = Some(t);
         true
     }
 
     /// Count the frames the autopilot's sequence numbers (one counter per sender, wrapping at
-    /// 256) skipped. A number up to 127 ahead of the newest is a jump over lost frames; one
-    /// up to 63 behind a late frame, taken off the count unless it already came (a duplicate).
+    /// 256) skipped. A number up to 63 behind the newest is a late frame, taken off the count
+    /// unless it already came (a duplicate); any other is a jump forward over lost frames (an
+    /// outage of up to 255 frames: beyond that the counter has wrapped unseen).
     pub fn on_sequence(&mut self, compid: u8, seq: u8) {
         if !self.is_autopilot_component(compid) {
             return;
         }
+        // Before the first frame nothing was missed: the whole window reads as arrived.
         let Some((newest, seen)) = self.seq else {
-            self.seq = Some((seq, 1));
+            self.seq = Some((seq, u64::MAX));
             return;
         };
-        let ahead = seq.wrapping_sub(newest);
-        if ahead == 0 {
-            return;
-        }
-        if ahead < 128 {
-            self.counters.lost_frames += u64::from(ahead - 1);
-            let seen = if ahead < 64 { seen << ahead | 1 } else { 1 };
-            self.seq = Some((seq, seen));
-            return;
-        }
         let behind = newest.wrapping_sub(seq);
-        if behind < 64 && seen & (1 << behind) == 0 {
-            self.counters.lost_frames = self.counters.lost_frames.saturating_sub(1);
-            self.seq = Some((newest, seen | 1 << behind));
+        if behind < 64 {
+            if seen & (1 << behind) == 0 {
+                self.counters.lost_frames = self.counters.lost_frames.saturating_sub(1);
+                self.seq = Some((newest, seen | 1 << behind));
+            }
+            return;
         }
+        let ahead = seq.wrapping_sub(newest);
+        self.counters.lost_frames += u64::from(ahead - 1);
+        let seen = if ahead < 64 { seen << ahead | 1 } else { 1 };
+        self.seq = Some((seq, seen));
     }
 
     /// Feed one message; complete instants are appended to `out` (in time order).
@@ -881,8 +890,44 @@ mod tests {
         assert_eq!(feed(&[250, 251, 252, 255, 0, 1]), 2);
         // A duplicate is no loss; a late frame (5 after 7) is taken off, its duplicate not.
         assert_eq!(feed(&[1, 3, 4, 7, 5, 5]), 2 + 1 + 2 - 1);
+        // An outage of 150 frames (a second or two of radio dropout), then a stream with one
+        // more lost.
+        assert_eq!(feed(&[158, 159, 161]), 4 + 150 + 1);
+        // A jump of 64 or more clears the window: what came before it is not "late".
+        assert_eq!(feed(&[240, 100]), 155 + 78 + 115);
         // Another component's counter is not the autopilot's.
         a.on_sequence(2, 100);
-        assert_eq!(a.counters.lost_frames, 4);
+        assert_eq!(a.counters.lost_frames, 348);
+    }
+
+    /// A frame from before the first one is not a late arrival of something counted lost.
+    #[test]
+    fn a_frame_older_than_the_first_takes_no_loss_off() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        for s in [10, 12, 5] {
+            a.on_sequence(1, s);
+        }
+        assert_eq!(a.counters.lost_frames, 1);
+    }
+
+    /// A reboot restarts the sequence: the jump to the new boot's numbers is no loss.
+    #[test]
+    fn a_reboot_takes_back_the_jump_of_its_sequence() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut out = vec![];
+        let send = |a: &mut VehicleAssembler, out: &mut Vec<TelemetrySample>, ms: u32, seq: u8| {
+            a.on_message(1, &attitude(ms), out);
+            a.on_sequence(1, seq);
+        };
+        for (k, ms) in (100_000..110_000).step_by(20).enumerate() {
+            send(&mut a, &mut out, ms, k as u8);
+        }
+        assert_eq!(a.counters.lost_frames, 0);
+        // The new boot's counter starts at 0 (and one of its frames, at 2 s, is lost).
+        for (k, ms) in (1_000..3_000).step_by(20).enumerate() {
+            send(&mut a, &mut out, ms, (k + usize::from(ms >= 2_000)) as u8);
+        }
+        assert_eq!(a.counters.reboots, 1);
+        assert_eq!(a.counters.lost_frames, 1);
     }
 }
