@@ -516,7 +516,10 @@ fn in_flight_calibration_is_not_fooled_by_gusts() {
 /// standard error doubled, the Hausman-style choice fell back to the gust-biased plain fit
 /// (x0.61-0.69 where the truth is x0.9) and the factors were 13.2 % off on average. Measured
 /// now: 5.1 % (ten of the twelve within 0.05 of the truth; plane roll x0.67 on seed 2 and x1.07
-/// on seed 3); the whole stream: 1.6 %. The bound sits between the two.
+/// on seed 3; 5.0 % since the offset's fix below); the whole stream: 1.6 %. The bound sits
+/// between the two. Random loss (5 %) first left the offset unidentified across holes of
+/// differing length (a simulated quad's roll offset -15.9, R² -4.7, false faults before the
+/// onset); now every offset is within 0.22 of the truth and the factors 5.5 % off.
 #[test]
 fn in_flight_calibration_over_a_lossy_link_is_not_fooled_by_gusts() {
     let fits = gusty_calibrations(|k| k % 10 == 9);
@@ -532,6 +535,33 @@ fn in_flight_calibration_over_a_lossy_link_is_not_fooled_by_gusts() {
     }
     let scale_err = scale_err / (2 * fits.len()) as f64;
     println!("lossy mean relative error: factor {scale_err:.4}");
+    assert!(scale_err < 0.07, "mean factor error {scale_err}");
+
+    // Random loss (5 %, a fixed pseudo-random pattern): holes of one, two or three samples.
+    let random = |k: usize| (k as u64).wrapping_mul(2_654_435_761) % 1000 < 50;
+    let fits = gusty_calibrations(random);
+    let mut scale_err = 0.0;
+    for (name, seed, truth, fit) in &fits {
+        for axis in 0..3 {
+            let (s, c) = (fit.scale[axis], fit.params.offset[axis]);
+            println!("random-loss {name} seed {seed} axis {axis}: x{s:.3}, c {c:.4}");
+            // The offset is the trim (0, the plane's pitch -1.2; measured within 0.22): a fit
+            // that left it unidentified put a simulated quad's roll offset at -15.9 (R² -4.7).
+            assert!(
+                (c - truth.offset[axis]).abs() < 0.3,
+                "{name} seed {seed} axis {axis}: c {c}"
+            );
+            assert!(
+                fit.quality.r_squared[axis] > 0.5,
+                "{name} seed {seed} axis {axis}"
+            );
+        }
+        for axis in 0..2 {
+            scale_err += (fit.scale[axis] - 0.9).abs() / 0.9;
+        }
+    }
+    let scale_err = scale_err / (2 * fits.len()) as f64;
+    println!("random-loss mean relative error: factor {scale_err:.4}");
     assert!(scale_err < 0.07, "mean factor error {scale_err}");
 }
 
