@@ -190,7 +190,11 @@ fn set_noise_from_fit(calibrated: &mut Profile, residual_std: &[f64], dt: f64) {
     }
 }
 
-fn median_interval(ts: impl Iterator<Item = f64>) -> f64 {
+/// The sample period: the median interval among those near the shortest common one (within
+/// half of the lower quartile's either way). A plain median reads a period twice as long when
+/// every third sample is lost (intervals 20, 40, 20, 40 ms: the filters then ran 20 ms steps as
+/// 40 ms ones); the quartile stands while fewer than three intervals in four span a hole.
+fn sample_period(ts: impl Iterator<Item = f64>) -> f64 {
     let v: Vec<f64> = ts.collect();
     let mut d: Vec<f64> = v
         .windows(2)
@@ -201,7 +205,13 @@ fn median_interval(ts: impl Iterator<Item = f64>) -> f64 {
         return 0.02;
     }
     d.sort_by(f64::total_cmp);
-    d[d.len() / 2]
+    let quartile = d[d.len() / 4];
+    let near: Vec<f64> = d
+        .iter()
+        .copied()
+        .filter(|x| (0.5 * quartile..=1.5 * quartile).contains(x))
+        .collect();
+    near[near.len() / 2]
 }
 
 impl VehiclePipeline {
@@ -680,7 +690,7 @@ impl VehiclePipeline {
         samples: &[StoredSample],
         sink: &mut dyn PipelineSink,
     ) {
-        let dt = median_interval(samples.iter().map(|s| s.t));
+        let dt = sample_period(samples.iter().map(|s| s.t));
         let l = profile.actuators.len();
         let mut profile = profile;
         // a_z is measured if the vehicle sends an IMU with most samples; those without it are
@@ -754,6 +764,17 @@ impl VehiclePipeline {
             );
         }
         let base = profile.rate_params();
+        // Too few usable samples where the stretch had many: the holes left too few runs.
+        let holes_note = |e: &crate::model::calibrate::CalibrationError| {
+            if gaps > 0 && matches!(e, crate::model::calibrate::CalibrationError::TooFew { .. }) {
+                format!(
+                    "; the stretch had {} samples, but a fit row spans consecutive ones and its {gaps} gaps leave too few unbroken runs (the link loses too many)",
+                    samples.len()
+                )
+            } else {
+                String::new()
+            }
+        };
         let identified = if profile.model.dynamics == Dynamics::Arx {
             // Above ~58 Hz the history, not MAX_DELAY_S, bounds the delay searched.
             let max_delay = ((MAX_DELAY_S / dt).round() as usize).min(U_HISTORY - 1);
@@ -763,7 +784,8 @@ impl VehiclePipeline {
                     sink.message(
                         self.sysid,
                         &format!(
-                            "warning: the identified model failed ({e}); using the profile's geometry, scaled per axis"
+                            "warning: the identified model failed ({e}{}); using the profile's geometry, scaled per axis",
+                            holes_note(&e)
                         ),
                     );
                     None
@@ -801,6 +823,7 @@ impl VehiclePipeline {
             let fit = match calibrate_scaled(&shifted, dt, &base) {
                 Ok(f) => f,
                 Err(e) => {
+                    let e = format!("{e}{}", holes_note(&e));
                     // The stretch was unusable (too short, too many holes): not the vehicle,
                     // so the next stretch may do; a stretch the user chose is not retried.
                     if self.cfg.calibrate_until.is_some() {
@@ -898,6 +921,22 @@ impl VehiclePipeline {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One sample in three lost: intervals 20, 40, 20, 40 ms, whose median could be 40.
+    #[test]
+    fn the_sample_period_is_the_short_interval_when_every_third_sample_is_lost() {
+        let t: Vec<f64> = (0..300)
+            .filter(|k| k % 3 != 2)
+            .map(|k| k as f64 * 0.02)
+            .collect();
+        assert!((sample_period(t.iter().copied()) - 0.02).abs() < 1e-12);
+        // With jitter and no loss, the median interval.
+        let t: Vec<f64> = (0..300)
+            .map(|k| k as f64 * 0.02 + if k % 2 == 0 { 0.001 } else { 0.0 })
+            .collect();
+        let p = sample_period(t.iter().copied());
+        assert!((p - 0.021).abs() < 1e-9 || (p - 0.019).abs() < 1e-9, "{p}");
+    }
     use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
 
     #[derive(Debug, Default)]

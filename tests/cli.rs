@@ -837,3 +837,20 @@ fn joining_a_flight_under_way_is_warned_about() {
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("no take-off seen"), "{err}");
 }
+
+/// One ATTITUDE in three lost: the sample period is still 20 ms (the median interval read
+/// 40 ms, and the filters ran 20 ms steps as 40 ms ones), and a calibration that cannot find
+/// the unbroken runs its rows need says so.
+#[test]
+fn a_link_losing_one_sample_in_three_keeps_the_period_and_says_why_it_cannot_calibrate() {
+    let (lossy, _) = lossy_copy(
+        &common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog"),
+        30,
+        3,
+        "cli_lossy_third",
+    );
+    let (code, _, err) = ahcmon(&["replay", lossy.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("dt 40"), "{err}");
+    assert!(err.contains("leave too few unbroken runs"), "{err}");
+}

@@ -13,7 +13,7 @@ use thiserror::Error;
 
 #[derive(Debug, Error, PartialEq)]
 pub enum CalibrationError {
-    #[error("{got} samples: at least {need} are needed for {l} actuators")]
+    #[error("{got} usable samples: at least {need} are needed for {l} actuators")]
     TooFew { got: usize, need: usize, l: usize },
     #[error("the commands do not excite axis {axis} enough to identify it (rank-deficient fit)")]
     NotExcited { axis: usize },
