@@ -329,7 +329,11 @@ impl VehicleAssembler {
                             | MavType::MAV_TYPE_ADSB
                             | MavType::MAV_TYPE_CAMERA
                     );
-                if is_autopilot && self.info.compid.is_none_or(|c| c == compid) {
+                // The first autopilot heartbeat names the component; the autopilot's own id
+                // (MAV_COMP_ID_AUTOPILOT1) takes over from another that claimed to be one (a
+                // companion computer's heartbeat first used to hide every sample of the
+                // vehicle behind it).
+                if is_autopilot && self.info.compid.is_none_or(|c| c == compid || compid == 1) {
                     self.info.compid = Some(compid);
                     self.info.mav_type = Some(hb.mavtype);
                     self.info.autopilot = Some(hb.autopilot);
@@ -929,5 +933,31 @@ mod tests {
         }
         assert_eq!(a.counters.reboots, 1);
         assert_eq!(a.counters.lost_frames, 1);
+    }
+
+    /// Another component claiming to be the autopilot first does not hide the autopilot's
+    /// (component 1) samples.
+    #[test]
+    fn the_autopilot_component_takes_over_from_an_earlier_claimant() {
+        use crate::link::dialects::ahcmon::HEARTBEAT_DATA;
+        let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            ..Default::default()
+        });
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut out = vec![];
+        a.on_message(2, &heartbeat, &mut out);
+        assert_eq!(a.info.compid, Some(2));
+        a.on_message(1, &heartbeat, &mut out);
+        assert_eq!(a.info.compid, Some(1));
+        // Component 2 cannot take it back.
+        a.on_message(2, &heartbeat, &mut out);
+        assert_eq!(a.info.compid, Some(1));
+        for ms in (1000..1100).step_by(20) {
+            a.on_message(1, &attitude(ms), &mut out);
+            a.on_message(1, &outputs(ms, 1500), &mut out);
+        }
+        assert_eq!(out.len(), 5);
     }
 }
