@@ -440,6 +440,10 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
         "{stderr}"
     );
     assert!(stderr.contains("ATTITUDE 0.0 Hz"), "{stderr}");
+    assert!(
+        stderr.contains("under 80 % of the 25 Hz asked for"),
+        "{stderr}"
+    );
 }
 
 /// The serial transport through a real pseudo-terminal (tests/reference/serial_feeder.py writes

@@ -226,6 +226,8 @@ struct RateRequests {
 struct Asked {
     since: Instant,
     acks: u32,
+    /// The results of acknowledgements other than ACCEPTED.
+    refused: Vec<String>,
     /// Frames of each needed message since the request.
     counts: [u64; 3],
     reported: bool,
@@ -255,6 +257,29 @@ impl Asked {
             "rates achieved (requested {hz} Hz, over {span:.1} s of {clock} time): {}",
             achieved.join(", ")
         );
+        // Under 80 % of the rate asked for (ArduPilot caps streams by its SRn_ parameters
+        // and by the link's bandwidth).
+        let slow: Vec<&str> = self
+            .messages
+            .iter()
+            .zip(counts.iter())
+            .filter(|(_, n)| (**n as f64 / span) < 0.8 * hz)
+            .map(|((_, name), _)| *name)
+            .collect();
+        if !slow.is_empty() {
+            text.push_str(&format!(
+                "; warning: {} under 80 % of the {hz} Hz asked for (the autopilot's stream limits or the link's bandwidth)",
+                slow.join(", ")
+            ));
+        }
+        if !self.refused.is_empty() {
+            text.push_str(&format!(
+                "; warning: {} of {} requests refused ({})",
+                self.refused.len(),
+                self.messages.len(),
+                self.refused.join(", ")
+            ));
+        }
         let asked = self.messages.len() as u32;
         if self.acks < asked {
             text.push_str(&format!(
@@ -275,7 +300,7 @@ impl RateRequests {
         sink: &mut dyn PipelineSink,
     ) -> Vec<Vec<u8>> {
         use crate::link::dialects::ahcmon::{
-            COMMAND_LONG_DATA, MavAutopilot, MavCmd, MavMessage, MavType,
+            COMMAND_LONG_DATA, MavAutopilot, MavCmd, MavMessage, MavResult, MavType,
         };
         let mut out = vec![];
         let sysid = frame.sysid;
@@ -285,6 +310,10 @@ impl RateRequests {
                     if ack.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL =>
                 {
                     a.acks += 1;
+                    if ack.result != MavResult::MAV_RESULT_ACCEPTED {
+                        a.refused
+                            .push(format!("{:?}", ack.result).replace("MAV_RESULT_", ""));
+                    }
                     sink.message(
                         sysid,
                         &format!(
@@ -371,6 +400,7 @@ impl RateRequests {
             Asked {
                 since: Instant::now(),
                 acks: 0,
+                refused: vec![],
                 counts: [0; 3],
                 reported: false,
                 messages: asked,

@@ -53,7 +53,7 @@ pub struct TelemetryCounters {
     /// new boot's filters.
     pub dropped_at_reboot: u64,
     /// Frames of the autopilot its sequence numbers say never arrived intact: lost on the link,
-    /// dropped above as corrupt (bad CRC), or left out of the log. A frame that arrives late is
+    /// dropped above as corrupt (bad CRC) or of an unknown message id, or left out of the log. A frame that arrives late is
     /// taken off again. An outage of 256 frames or more wraps the counter and is not seen, and
     /// two links merged (each with its own counter) make the count meaningless.
     pub lost_frames: u64,
