@@ -144,6 +144,8 @@ pub struct PipelineCounters {
 /// joined a flight under way (a real vehicle spends longer than this on the ground between
 /// boot and take-off; a simulator starts airborne at boot).
 const JOINED_IN_FLIGHT_S: f64 = 30.0;
+/// A calibration stretch shorter than this (s) is warned about.
+const SHORT_CALIBRATION_S: f64 = 10.0;
 const JOINED_WARNING: &str = "no take-off seen";
 
 pub struct VehiclePipeline {
@@ -878,16 +880,26 @@ impl VehiclePipeline {
                 .collect();
             (calibrated, Some(fit), summary.join(", "))
         };
+        let span = samples.last().map_or(0.0, |s| s.t) - samples[0].t;
         sink.message(
             self.sysid,
             &format!(
-                "calibrated on {:.1} s ({} samples, dt {:.1} ms): {}",
-                samples.last().map_or(0.0, |s| s.t) - samples[0].t,
+                "calibrated on {span:.1} s ({} samples, dt {:.1} ms): {}",
                 samples.len(),
                 dt * 1e3,
                 summary
             ),
         );
+        // A stretch cut short (by --calibrate-until / --calibrate-s) still fits, but loosely.
+        if span < SHORT_CALIBRATION_S {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: the calibration stretch is only {span:.1} s (the default is 20 s from {} s after take-off): a short stretch leaves the model loose, and healthy actuators may read off",
+                    self.cfg.settle_s
+                ),
+            );
+        }
         let filters = match build(&calibrated, dt) {
             Ok(f) => f,
             Err(e) => {

@@ -886,3 +886,19 @@ fn a_heli_on_a_lossy_link_is_not_estimated_with_a_geometry_fitted_on_holes() {
         .count();
     assert_eq!(faults, 0);
 }
+
+/// A calibration stretch cut to 3.8 s still fits, and is warned about; the default 20 s is not.
+#[test]
+fn a_short_calibration_stretch_is_warned_about() {
+    let log = common::data("sitl_heli_servo1_gain0p7/arducopter-heli_sitl_servo1_mul0.7.tlog");
+    let log = log.to_str().unwrap();
+    let (code, _, err) = ahcmon(&["replay", log, "--headless", "--calibrate-until", "80"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("warning: the calibration stretch is only 3.8 s"),
+        "{err}"
+    );
+    let (code, _, err) = ahcmon(&["replay", log, "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("calibration stretch is only"), "{err}");
+}
