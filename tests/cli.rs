@@ -721,22 +721,8 @@ fn a_lossy_attitude_stream_keeps_the_change_test() {
         "cli_lossy_attitude",
     );
     assert!(attitude > 5000, "{attitude} ATTITUDE");
-    let decisions = lossy.with_file_name("decisions.jsonl");
-    let (code, out, err) = ahcmon(&[
-        "replay",
-        lossy.to_str().unwrap(),
-        "--headless",
-        "--decisions",
-        decisions.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    let (out, _, faults) = replay_faults(&lossy);
     assert!(summary_count(&out, "gaps while estimating") > 400, "{out}");
-    let faults: Vec<serde_json::Value> = std::fs::read_to_string(&decisions)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .filter(|d: &serde_json::Value| matches!(d["event"].as_str(), Some("fault" | "changed")))
-        .collect();
     let first = faults.first().expect("the motor 4 fault is decided");
     let t = first["t"].as_f64().unwrap();
     assert!((97.573..97.573 + 2.0).contains(&t), "decided at {t} s");
@@ -749,6 +735,27 @@ fn a_lossy_attitude_stream_keeps_the_change_test() {
             .any(|d| d["detail"].as_str().unwrap_or("").contains("the data fit")),
         "the change test reads the fault: {faults:?}"
     );
+}
+
+/// Replay `log` headless (exit 0) with its decisions written beside it: the summary, the
+/// messages and the fault and changed decisions.
+fn replay_faults(log: &std::path::Path) -> (String, String, Vec<serde_json::Value>) {
+    let decisions = log.with_file_name("decisions.jsonl");
+    let (code, out, err) = ahcmon(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--headless",
+        "--decisions",
+        decisions.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let faults = std::fs::read_to_string(&decisions)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .filter(|d: &serde_json::Value| matches!(d["event"].as_str(), Some("fault" | "changed")))
+        .collect();
+    (out, err, faults)
 }
 
 /// The axis factors of a replay's calibration line ("roll x1.04 ..."), in order.
@@ -868,23 +875,10 @@ fn a_heli_on_a_lossy_link_is_not_estimated_with_a_geometry_fitted_on_holes() {
         5,
         "cli_lossy_heli",
     );
-    let decisions = lossy.with_file_name("decisions.jsonl");
-    let (code, _, err) = ahcmon(&[
-        "replay",
-        lossy.to_str().unwrap(),
-        "--headless",
-        "--decisions",
-        decisions.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    let (_, err, faults) = replay_faults(&lossy);
     assert!(err.contains("the link loses too many"), "{err}");
     assert!(!err.contains("using the profile's geometry"), "{err}");
-    let faults = std::fs::read_to_string(&decisions)
-        .unwrap()
-        .lines()
-        .filter(|l| l.contains(r#""event":"fault""#))
-        .count();
-    assert_eq!(faults, 0);
+    assert!(faults.is_empty(), "{faults:?}");
 }
 
 /// A calibration stretch cut to 3.8 s still fits, and is warned about; the default 20 s is not.
