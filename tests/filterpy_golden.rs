@@ -35,14 +35,16 @@ fn ukf(m: PaperHeli, alpha: f64) -> Ukf<PaperHeli, 5, 3, 11> {
     )
 }
 
-fn golden(alpha: f64) {
-    let dir = common::temp_dir(&format!("filterpy_alpha_{alpha}"));
+/// `coast_every`: every k-th measurement is lost, and both filters only predict there.
+fn golden(alpha: f64, coast_every: usize) {
+    let dir = common::temp_dir(&format!("filterpy_alpha_{alpha}_coast_{coast_every}"));
     let m = model(false);
     let cfg = serde_json::json!({
         "params": m.params, "dt": 0.02, "steps": 2000, "seed": 42, "fault_step": 1000, "fault_gamma": 0.6,
         "u_trim": trim_inputs(10.0), "process_var": PROCESS_VAR, "measurement_var": MEAS_VAR,
         "alpha": alpha, "beta": 2.0, "kappa": 0.0,
         "x0": [0.0, 0.0, 0.0, 1.0, 0.0], "p0_diag": P0_DIAG, "q_diag": Q_DIAG,
+        "coast_every": coast_every,
     });
     let params = dir.join("params.json");
     let out = dir.join("filterpy.csv");
@@ -54,13 +56,18 @@ fn golden(alpha: f64) {
     ]);
     let text = std::fs::read_to_string(&out).unwrap();
     let mut f = ukf(m, alpha);
-    let (mut worst_x, mut worst_p, mut rows) = (0.0f64, 0.0f64, 0);
+    let (mut worst_x, mut worst_p, mut rows, mut coasts) = (0.0f64, 0.0f64, 0, 0);
     for line in text.lines() {
         let v: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
         assert_eq!(v.len(), 1 + 4 + 3 + 5 + 25);
         let u = &v[1..5];
         let y = SVector::<f64, 3>::from_column_slice(&v[5..8]);
-        f.try_step(u, &y).unwrap();
+        if y.iter().all(|v| v.is_nan()) {
+            f.coast(u).unwrap();
+            coasts += 1;
+        } else {
+            f.try_step(u, &y).unwrap();
+        }
         let x_ref = SVector::<f64, 5>::from_column_slice(&v[8..13]);
         let p_ref = SMatrix::<f64, 5, 5>::from_row_slice(&v[13..38]);
         worst_x = worst_x.max((f.x - x_ref).amax());
@@ -69,7 +76,10 @@ fn golden(alpha: f64) {
         rows += 1;
     }
     assert_eq!(rows, 2000);
-    println!("alpha {alpha}: max |dx| = {worst_x:.3e}, max |dP|/max|P| = {worst_p:.3e}");
+    assert_eq!(coasts, 2000usize.checked_div(coast_every).unwrap_or(0));
+    println!(
+        "alpha {alpha}, {coasts} coasts: max |dx| = {worst_x:.3e}, max |dP|/max|P| = {worst_p:.3e}"
+    );
     assert!(
         worst_x <= 1e-9,
         "state differs from filterpy by {worst_x:e}"
@@ -82,12 +92,18 @@ fn golden(alpha: f64) {
 
 #[test]
 fn ukf_matches_filterpy_alpha_1() {
-    golden(1.0);
+    golden(1.0, 0);
 }
 
 #[test]
 fn ukf_matches_filterpy_alpha_0_5() {
-    golden(0.5);
+    golden(0.5, 0);
+}
+
+/// A lost measurement (one in seven): the coast is filterpy's `predict` without `update`.
+#[test]
+fn ukf_coast_matches_filterpy_predict_only() {
+    golden(1.0, 7);
 }
 
 /// On the linear model the augmented system is linear in z for known u: the UKF must equal a

@@ -11,7 +11,7 @@ use super::linalg::{
     SparseRows, cholesky_jitter, identity_tail_start, mirror_upper, sandwich_walk_in_place,
     sym_top_eigen, symmetrize,
 };
-use super::{Estimator, EstimatorError, check_inputs};
+use super::{Estimator, EstimatorError, check_commands, check_inputs};
 use crate::model::{BilinearTerm, Model};
 use nalgebra::{SMatrix, SVector};
 
@@ -143,6 +143,19 @@ pub fn shape_step<const N: usize, const M: usize>(
     r_sqrt_lmax: f64,
     e: &SVector<f64, M>,
 ) -> Result<(), EstimatorError> {
+    predict_shape(st, p_prev, a, q, half_widths);
+    update_shape(st, h, r, r_sqrt_lmax, e)
+}
+
+/// The prediction half of [`shape_step`]: `Π`, the Minkowski sum of the linearised set, the
+/// process set and the linearisation-error set (fills `apa` to `pi`).
+pub fn predict_shape<const N: usize, const M: usize>(
+    st: &mut ShapeStep<N, M>,
+    p_prev: &SMatrix<f64, N, N>,
+    a: &SMatrix<f64, N, N>,
+    q: &SVector<f64, N>,
+    half_widths: &SVector<f64, N>,
+) {
     st.apa = *p_prev;
     sandwich_walk_in_place(a, &mut st.apa, identity_tail_start(a));
     symmetrize(&mut st.apa);
@@ -166,6 +179,16 @@ pub fn shape_step<const N: usize, const M: usize>(
     for i in 0..N {
         st.pi[(i, i)] += st.q_hat[i] / beta;
     }
+}
+
+/// The update half of [`shape_step`]: intersect `Π` with the measurement set.
+fn update_shape<const N: usize, const M: usize>(
+    st: &mut ShapeStep<N, M>,
+    h: &SMatrix<f64, M, N>,
+    r: &SMatrix<f64, M, M>,
+    r_sqrt_lmax: f64,
+    e: &SVector<f64, M>,
+) -> Result<(), EstimatorError> {
     // Paper's rho from the largest eigenvalues of the predicted output set and of R.
     let sh = SparseRows::new(h);
     st.h_pi = sh.right_t(&st.pi).transpose(); // Π symmetric
@@ -513,6 +536,35 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         self.innovation = e;
         self.outcome = outcome;
         Ok(outcome)
+    }
+
+    /// A period without a measurement (lost on the link): the prediction only, so the set
+    /// grows by one period's process set and the next measurement is compared with the state
+    /// at its own time. The intermediate record (`last`) holds the prediction; the MIT-ESMF
+    /// reads it. On error the set is left as it was.
+    pub fn coast(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
+        check_commands(self.model.input_dim(), u)?;
+        self.last_a = self.model.jacobian(&self.x, u);
+        let fx = self.model.f(&self.x, u);
+        self.last_p_prev = self.p;
+        let (center, half) = remainder_box(self.model.bilinear_terms(), &self.p);
+        predict_shape(
+            &mut self.last,
+            &self.last_p_prev,
+            &self.last_a,
+            &self.process_noise,
+            &half,
+        );
+        let mut p = self.last.pi;
+        symmetrize(&mut p);
+        let x = fx + center;
+        if !(p.iter().all(|v| v.is_finite()) && x.iter().all(|v| v.is_finite())) {
+            return Err(EstimatorError::NonFinite { what: "ESMF shape" });
+        }
+        self.x = x;
+        self.p = p;
+        self.intersect_box();
+        Ok(())
     }
 
     /// Bounds of coordinate `i`: the set's projection `x_i ± √P_ii` (exact support function),

@@ -62,13 +62,9 @@ impl<const N: usize> ShapeSensitivity<N> {
         forgetting: f64,
     ) -> SVector<f64, N> {
         let mut grad = SVector::<f64, N>::zeros();
-        let d_r = remainder_dim(&st.half_widths);
-        let (beta, rho, delta) = (st.mink_beta, st.rho, st.consistency);
-        let tr_qbar = st.q_bar.sum();
-        let (s1, s2) = (tr_qbar.sqrt(), q.sum().sqrt());
-        let (s_hat, t) = (st.q_hat.sum().sqrt(), st.apa.trace().max(0.0).sqrt());
+        let pc = PredictionConstants::new(st, q, a);
+        let (rho, delta) = (st.rho, st.consistency);
         let (lam_sqrt, w) = (st.top_lambda.max(0.0).sqrt(), st.w_inv_e);
-        let walk_from = super::linalg::identity_tail_start(a);
         let krk = st.gain * r * st.gain.transpose();
         let tr_p = st.p_bar.trace() * delta;
         // Products every i reuses: H Π, H Π Hᵀ, H AP_{k-1}Aᵀ.
@@ -76,50 +72,11 @@ impl<const N: usize> ShapeSensitivity<N> {
         let sh = super::linalg::SparseRows::new(h);
         let h_apa = sh.right_t(&st.apa).transpose(); // symmetric
         let k_t = st.gain.transpose();
-        for i in (0..N).filter(|&i| !self.skip[i]) {
-            let dp_prev = &self.dp[i];
-            // Linearisation-error set: Q̄_rr = d_r b_r², b_r = Σ |c|/2 √(P_jj P_kk).
-            let mut db = SVector::<f64, N>::zeros();
-            for term in terms {
-                let prod = p_prev[(term.j, term.j)] * p_prev[(term.k, term.k)];
-                if prod > 0.0 {
-                    db[term.row] += 0.25
-                        * forgetting
-                        * term.coeff.abs()
-                        * (dp_prev[(term.j, term.j)] * p_prev[(term.k, term.k)]
-                            + p_prev[(term.j, term.j)] * dp_prev[(term.k, term.k)])
-                        / prod.sqrt();
-                }
-            }
-            // d(A P Aᵀ) = λ A dP_{k-1} Aᵀ (λ: forgetting), computed over dP_{k-1} (read only
-            // above), which the assembly below then overwrites entry by entry with dP_k. The
-            // matrix is never formed scaled: every use carries λ in its coefficient.
+        let skip = self.skip;
+        for i in (0..N).filter(|&i| !skip[i]) {
+            let (c_a, c_apa, d_diag) =
+                self.prediction_derivative(i, &pc, st, p_prev, a, terms, q, forgetting);
             let a_dp_a = &mut self.dp[i];
-            super::linalg::sandwich_walk_in_place(a, a_dp_a, walk_from);
-            let dqbar = st.half_widths.component_mul(&db) * (2.0 * d_r);
-            let mut dq = SVector::<f64, N>::zeros();
-            dq[i] = 1.0;
-            let dq_hat = if tr_qbar > 0.0 {
-                let nb = st.nest_beta;
-                let ds1 = dqbar.sum() / (2.0 * s1);
-                let ds2 = 1.0 / (2.0 * s2);
-                let dnb = (s1 * ds2 - s2 * ds1) / (s1 + s2).powi(2);
-                dqbar / (1.0 - nb) + st.q_bar * (dnb / (1.0 - nb).powi(2)) + dq / nb
-                    - q * (dnb / (nb * nb))
-            } else {
-                dq
-            };
-            let ds_hat = dq_hat.sum() / (2.0 * s_hat);
-            let dt = if t > 0.0 {
-                forgetting * a_dp_a.trace() / (2.0 * t)
-            } else {
-                0.0
-            };
-            let dbeta = (t * ds_hat - s_hat * dt) / (s_hat + t).powi(2);
-            // dΠ = c_a·A dP Aᵀ + c_apa·APAᵀ + diag(d_diag).
-            let c_a = forgetting / (1.0 - beta);
-            let c_apa = dbeta / (1.0 - beta).powi(2);
-            let d_diag = dq_hat / beta - st.q_hat * (dbeta / (beta * beta));
             let mut h_dpi = sh.right_t(a_dp_a).transpose() * c_a + h_apa * c_apa;
             for j in 0..N {
                 for m in 0..M {
@@ -171,6 +128,128 @@ impl<const N: usize> ShapeSensitivity<N> {
             grad[i] = -ddelta * tr_p + (1.0 - delta) * trace;
         }
         grad
+    }
+}
+
+/// The scalars of one prediction that every `dΠ/dq_i` reuses.
+struct PredictionConstants {
+    d_r: f64,
+    tr_qbar: f64,
+    /// `√tr Q̄`, `√tr Q`, `√tr Q̂`, `√tr APAᵀ`.
+    s1: f64,
+    s2: f64,
+    s_hat: f64,
+    t: f64,
+    walk_from: usize,
+}
+
+impl PredictionConstants {
+    fn new<const N: usize, const M: usize>(
+        st: &ShapeStep<N, M>,
+        q: &SVector<f64, N>,
+        a: &SMatrix<f64, N, N>,
+    ) -> Self {
+        let tr_qbar = st.q_bar.sum();
+        Self {
+            d_r: remainder_dim(&st.half_widths),
+            tr_qbar,
+            s1: tr_qbar.sqrt(),
+            s2: q.sum().sqrt(),
+            s_hat: st.q_hat.sum().sqrt(),
+            t: st.apa.trace().max(0.0).sqrt(),
+            walk_from: super::linalg::identity_tail_start(a),
+        }
+    }
+}
+
+impl<const N: usize> ShapeSensitivity<N> {
+    /// The derivative of the prediction `Π` w.r.t. `q_i`, as
+    /// `dΠ = c_a·A dP_{k-1} Aᵀ + c_apa·APAᵀ + diag(d_diag)`: returns `(c_a, c_apa, d_diag)`
+    /// and leaves `A dP_{k-1} Aᵀ` in `self.dp[i]`.
+    #[allow(clippy::too_many_arguments)]
+    fn prediction_derivative<const M: usize>(
+        &mut self,
+        i: usize,
+        pc: &PredictionConstants,
+        st: &ShapeStep<N, M>,
+        p_prev: &SMatrix<f64, N, N>,
+        a: &SMatrix<f64, N, N>,
+        terms: &[BilinearTerm],
+        q: &SVector<f64, N>,
+        forgetting: f64,
+    ) -> (f64, f64, SVector<f64, N>) {
+        let beta = st.mink_beta;
+        let dp_prev = &self.dp[i];
+        // Linearisation-error set: Q̄_rr = d_r b_r², b_r = Σ |c|/2 √(P_jj P_kk).
+        let mut db = SVector::<f64, N>::zeros();
+        for term in terms {
+            let prod = p_prev[(term.j, term.j)] * p_prev[(term.k, term.k)];
+            if prod > 0.0 {
+                db[term.row] += 0.25
+                    * forgetting
+                    * term.coeff.abs()
+                    * (dp_prev[(term.j, term.j)] * p_prev[(term.k, term.k)]
+                        + p_prev[(term.j, term.j)] * dp_prev[(term.k, term.k)])
+                    / prod.sqrt();
+            }
+        }
+        // d(A P Aᵀ) = λ A dP_{k-1} Aᵀ (λ: forgetting), computed over dP_{k-1} (read only
+        // above), which the caller then overwrites with dP_k. The matrix is never formed
+        // scaled: every use carries λ in its coefficient.
+        let a_dp_a = &mut self.dp[i];
+        super::linalg::sandwich_walk_in_place(a, a_dp_a, pc.walk_from);
+        let dqbar = st.half_widths.component_mul(&db) * (2.0 * pc.d_r);
+        let mut dq = SVector::<f64, N>::zeros();
+        dq[i] = 1.0;
+        let dq_hat = if pc.tr_qbar > 0.0 {
+            let (s1, s2) = (pc.s1, pc.s2);
+            let nb = st.nest_beta;
+            let ds1 = dqbar.sum() / (2.0 * s1);
+            let ds2 = 1.0 / (2.0 * s2);
+            let dnb = (s1 * ds2 - s2 * ds1) / (s1 + s2).powi(2);
+            dqbar / (1.0 - nb) + st.q_bar * (dnb / (1.0 - nb).powi(2)) + dq / nb
+                - q * (dnb / (nb * nb))
+        } else {
+            dq
+        };
+        let (s_hat, t) = (pc.s_hat, pc.t);
+        let ds_hat = dq_hat.sum() / (2.0 * s_hat);
+        let dt = if t > 0.0 {
+            forgetting * a_dp_a.trace() / (2.0 * t)
+        } else {
+            0.0
+        };
+        let dbeta = (t * ds_hat - s_hat * dt) / (s_hat + t).powi(2);
+        let c_a = forgetting / (1.0 - beta);
+        let c_apa = dbeta / (1.0 - beta).powi(2);
+        let d_diag = dq_hat / beta - st.q_hat * (dbeta / (beta * beta));
+        (c_a, c_apa, d_diag)
+    }
+
+    /// `dP/dq_i` carried through a prediction without an update (a coast over a lost sample,
+    /// whose set is `Π`): the exact derivative of the Minkowski sum, betas included. `st` holds
+    /// the prediction's quantities (`predict_shape`), `p_prev` the shape it started from.
+    pub fn propagate_prediction<const M: usize>(
+        &mut self,
+        st: &ShapeStep<N, M>,
+        p_prev: &SMatrix<f64, N, N>,
+        a: &SMatrix<f64, N, N>,
+        terms: &[BilinearTerm],
+        q: &SVector<f64, N>,
+        forgetting: f64,
+    ) {
+        let pc = PredictionConstants::new(st, q, a);
+        let skip = self.skip;
+        for i in (0..N).filter(|&i| !skip[i]) {
+            let (c_a, c_apa, d_diag) =
+                self.prediction_derivative(i, &pc, st, p_prev, a, terms, q, forgetting);
+            let dp = &mut self.dp[i];
+            *dp *= c_a;
+            *dp += st.apa * c_apa;
+            for j in 0..N {
+                dp[(j, j)] += d_diag[j];
+            }
+        }
     }
 }
 
@@ -268,6 +347,26 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
             }
         }
         Ok(out)
+    }
+}
+
+impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
+    /// A period without a measurement (lost on the link): the ESMF's prediction only. With no
+    /// measurement there is no loss to descend, so q stays; the sensitivities are carried
+    /// through the prediction, so the next step's gradient is about the set it starts from.
+    pub fn coast(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
+        self.esmf.coast(u)?;
+        let e = &self.esmf;
+        self.sensitivity.skip = self.fixed;
+        self.sensitivity.propagate_prediction(
+            &e.last,
+            &e.last_p_prev,
+            &e.last_a,
+            e.model.bilinear_terms(),
+            &e.process_noise,
+            self.adapt.forgetting,
+        );
+        Ok(())
     }
 }
 

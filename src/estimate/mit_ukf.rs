@@ -16,7 +16,7 @@ use super::mit::{
     AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
     gn_step, gradient_from, h_x_ht,
 };
-use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
+use super::{Estimator, EstimatorError, Ukf, UkfParams, check_commands, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
 
@@ -80,20 +80,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         self.ukf.try_step(u, y)?;
         self.steps += 1;
         self.window.push(&self.ukf.innovation);
-        self.sensitivity
-            .propagate_masked(&a, self.adapt.forgetting, &self.fixed);
+        let propagate_fixed_sum = self.propagate_sensitivities(&a);
         let ahc = self.ukf.model.ahc_start();
-        // While no AHC entry is fixed and the sum is zero (never fixed, or `fixed` changed
-        // back) it stays zero: skip its propagation.
-        let propagate_fixed_sum =
-            (ahc..N).any(|i| self.fixed[i]) || self.fixed_sum.iter().any(|v| *v != 0.0);
-        if propagate_fixed_sum {
-            let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
-            for i in (ahc..N).filter(|&i| self.fixed[i]) {
-                next[(i, i)] += self.ukf.process_noise[i];
-            }
-            self.fixed_sum = next;
-        }
         self.schedule.observe(self.ukf.nis, M, &self.adapt);
         // The part of S the AHC noise accounts for (first order, from the sensitivities).
         let (h, sh) = (&self.ukf.h, SparseRows::new(&self.ukf.h));
@@ -120,6 +108,37 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
                     gn_step(q, grad[i], curv[i], eta, self.q0[i], &self.adapt);
             }
         }
+        Ok(())
+    }
+
+    /// Propagate the sensitivities (and the fixed entries' sum) over one prediction with
+    /// transition `a`. Returns whether the fixed sum is in use: while no AHC entry is fixed and
+    /// the sum is zero (never fixed, or `fixed` changed back) it stays zero and is skipped.
+    fn propagate_sensitivities(&mut self, a: &GainTransition<N, M>) -> bool {
+        self.sensitivity
+            .propagate_masked(a, self.adapt.forgetting, &self.fixed);
+        let ahc = self.ukf.model.ahc_start();
+        let propagate_fixed_sum =
+            (ahc..N).any(|i| self.fixed[i]) || self.fixed_sum.iter().any(|v| *v != 0.0);
+        if propagate_fixed_sum {
+            let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
+            for i in (ahc..N).filter(|&i| self.fixed[i]) {
+                next[(i, i)] += self.ukf.process_noise[i];
+            }
+            self.fixed_sum = next;
+        }
+        propagate_fixed_sum
+    }
+
+    /// A period without a measurement (lost on the link): the UKF's prediction, and the
+    /// sensitivities carried through it (`dP⁻/dq` of two predictions in a row, with no update
+    /// between). Nothing is observed, so the innovation window, the step-size schedule and the
+    /// process noise stay as they are.
+    pub fn coast(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
+        check_commands(self.ukf.model.input_dim(), u)?;
+        let a = Self::sensitivity_transition(&self.ukf, u);
+        self.ukf.coast(u)?;
+        self.propagate_sensitivities(&a);
         Ok(())
     }
 

@@ -11,7 +11,9 @@ mod mit_ukf;
 mod ukf;
 pub mod vehicle;
 
-pub use esmf::{Esmf, EsmfOutcome, EsmfParams, ShapeStep, remainder_box, scale_block, shape_step};
+pub use esmf::{
+    Esmf, EsmfOutcome, EsmfParams, ShapeStep, predict_shape, remainder_box, scale_block, shape_step,
+};
 pub use kf_ukf::{KfUkf, SlaveKfParams};
 pub use mit::{
     AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
@@ -63,6 +65,17 @@ pub(crate) fn check_inputs<const M: usize>(
     u: &[f64],
     y: &SVector<f64, M>,
 ) -> Result<(), EstimatorError> {
+    check_commands(expected, u)?;
+    if !y.iter().all(|v| v.is_finite()) {
+        return Err(EstimatorError::NonFinite {
+            what: "measurement",
+        });
+    }
+    Ok(())
+}
+
+/// The inputs of a step without a measurement (a coast over a lost sample).
+pub(crate) fn check_commands(expected: usize, u: &[f64]) -> Result<(), EstimatorError> {
     if u.len() != expected {
         return Err(EstimatorError::InputDimension {
             expected,
@@ -71,11 +84,6 @@ pub(crate) fn check_inputs<const M: usize>(
     }
     if !u.iter().all(|v| v.is_finite()) {
         return Err(EstimatorError::NonFinite { what: "input" });
-    }
-    if !y.iter().all(|v| v.is_finite()) {
-        return Err(EstimatorError::NonFinite {
-            what: "measurement",
-        });
     }
     Ok(())
 }

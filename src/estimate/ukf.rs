@@ -4,7 +4,7 @@
 use super::linalg::{
     SparseRows, cholesky_jitter, identity_tail_start, sandwich_gain, sandwich_walk, symmetrize,
 };
-use super::{Estimator, EstimatorError, check_inputs};
+use super::{Estimator, EstimatorError, check_commands, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
 
@@ -249,6 +249,24 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
             self.p = p0;
             self.h = h0;
             self.h_offset = o0;
+        }
+        r
+    }
+
+    /// A period without a measurement (lost on the link): the time update only. The gain is
+    /// zeroed, since no update followed this prediction (the MIT-UKF's sensitivity transition
+    /// `F (I - K H)` reads it). On error the state is left as it was.
+    pub fn coast(&mut self, u: &[f64]) -> Result<(), EstimatorError> {
+        check_commands(self.model.input_dim(), u)?;
+        let (x0, p0, h0, o0) = (self.x, self.p, self.h, self.h_offset);
+        let r = self.predict(u);
+        if r.is_err() {
+            self.x = x0;
+            self.p = p0;
+            self.h = h0;
+            self.h_offset = o0;
+        } else {
+            self.gain = SMatrix::zeros();
         }
         r
     }

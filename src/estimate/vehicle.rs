@@ -76,6 +76,10 @@ pub trait VehicleFilters: Send {
     /// One step of both filters. `u.len()` = [`VehicleFilters::inputs`] (the commands, then for
     /// an identified model the previous measured rate increment), `y` = [p, q, r(, a_z)].
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2];
+    /// Both filters over a period whose sample was lost: the prediction only, with the inputs
+    /// that acted then (`u` as for `step`). Then the next `step` compares its measurement
+    /// with the state at its own time instead of stepping one period across the hole.
+    fn coast(&mut self, u: &[f64]) -> [Result<(), EstimatorError>; 2];
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate;
     /// What the healthy model (gamma = 1, delta = 0) fails to predict of `y` from the previous
     /// measured rates and this step's inputs (same `u` as `step`): `[p, q, r(, a_z)]`, unweighted.
@@ -369,6 +373,9 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         } else {
             [ukf.try_step(u, &y), esmf.try_step(u, &y).map(|_| ())]
         }
+    }
+    fn coast(&mut self, u: &[f64]) -> [Result<(), EstimatorError>; 2] {
+        [self.ukf.coast(u), self.esmf.coast(u)]
     }
     fn healthy_residual(&self, rates_prev: &[f64; 3], u: &[f64], y: &[f64]) -> [f64; 4] {
         use crate::model::Model;

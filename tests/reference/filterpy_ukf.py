@@ -8,7 +8,8 @@ code): zero-order hold of the diagonal rate dynamics plus Euler gyroscopic terms
 simulates a 2000-step run with a gamma fault at step 1000 (its own RNG), runs filterpy with
 MerweScaledSigmaPoints(n, alpha, beta, kappa), and writes per step: inputs, measurement,
 filterpy's posterior state and covariance. The Rust test feeds the same inputs and measurements
-to ahcmon's UKF and compares.
+to ahcmon's UKF and compares. With "coast_every": k in the parameters, every k-th measurement is
+lost: filterpy only predicts on that step, and its row carries the measurement as nan.
 """
 import csv
 import json
@@ -71,10 +72,15 @@ def main():
     ukf.R = np.eye(3) * cfg["measurement_var"]
     with open(out_path, "w", newline="") as f:
         w = csv.writer(f)
+        coast_every = cfg.get("coast_every", 0)
         for k in range(steps):
             ukf.predict(u=u_seq[k])
-            ukf.update(ys[k])
-            row = [k] + list(u_seq[k]) + list(ys[k]) + list(ukf.x) + list(ukf.P.reshape(-1))
+            y = ys[k]
+            if coast_every and k % coast_every == coast_every - 1:
+                y = np.full(3, np.nan)
+            else:
+                ukf.update(y)
+            row = [k] + list(u_seq[k]) + list(y) + list(ukf.x) + list(ukf.P.reshape(-1))
             w.writerow([repr(float(v)) for v in row])
 
 
