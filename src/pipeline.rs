@@ -65,10 +65,13 @@ struct StoredSample {
 
 /// Commands kept for an identified model's delay (samples).
 const U_HISTORY: usize = crate::telemetry::profile::MAX_ARX_DELAY + 1;
-/// Longest hole in the samples the filters coast over, predicting each lost period; a longer
-/// outage restarts the command history and is stepped across (the diagnosis' change test
-/// starts over after one as long, too).
-const MAX_COAST_S: f64 = 1.0;
+/// Longest hole in the samples the filters coast over, predicting each lost period with the last
+/// outputs held; a longer outage restarts the command history and is stepped across (the
+/// diagnosis' change test has its own limit, 1 s, to keep its residuals across a hole). Held for
+/// longer, the outputs are too far from what the autopilot sent: on the simulated healthy plane
+/// with a hole every 5 s, coasting gave fewer false decisions than stepping across for 0.3 s
+/// holes (3 against 10) but more for 0.5 s (11 against 6) and 0.8 s holes (19 against 3).
+const MAX_COAST_S: f64 = 0.3;
 /// Longest command delay the identification considers (s).
 const MAX_DELAY_S: f64 = 0.12;
 /// Longest interval between two calibration samples, in median sample periods, that still
@@ -83,8 +86,9 @@ struct Running {
     l: usize,
     m: usize,
     prev_u: Option<[f64; MAX_ACTUATORS]>,
-    /// The commands of the last steps (ring) and how many were pushed since the last gap:
-    /// an identified model takes them `delay` steps late.
+    /// The commands of the last periods (ring) and how many were pushed since take-off or the
+    /// last hole too long to coast over (coasts push the held outputs): an identified model
+    /// takes them `delay` periods late.
     u_history: [[f64; MAX_ACTUATORS]; U_HISTORY],
     u_pushed: usize,
     delay: usize,
@@ -153,14 +157,17 @@ pub struct FlightGate {
 /// Counters of the pipeline itself.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct PipelineCounters {
+    /// Filter steps (predict and update; coasts are counted in `coasted`).
     pub steps: u64,
-    /// Steps whose filter update failed (the filter was reset).
+    /// Steps and coasts whose filter update failed (the filter was reset).
     pub filter_errors: u64,
     /// Intervals of more than 1.5 sample periods between samples while estimating (lost
     /// samples; a missing a_z leaves one too). The filters coast over the lost periods of a
-    /// hole of up to 1 s (prediction only, the last outputs held); a longer one is stepped
+    /// hole of up to 0.3 s (prediction only, the last outputs held); a longer one is stepped
     /// across and restarts the command history.
     pub gaps: u64,
+    /// Lost periods the filters coasted over (prediction only, inside the gaps above).
+    pub coasted: u64,
     /// Intervals of more than 1.5 sample periods in the calibration stretch (the steps across
     /// them are left out of the fit).
     pub calibration_gaps: u64,
@@ -597,6 +604,20 @@ impl VehiclePipeline {
                 else {
                     return;
                 };
+                let mut y = [0.0; 4];
+                y[..3].copy_from_slice(&s.rates);
+                if r.m == 4 {
+                    match s.az {
+                        Some(a) => y[3] = a,
+                        None => {
+                            // Skipped, before its outputs replace the previous ones: the next
+                            // sample follows a gap (last_t stays), and the filters coast over
+                            // this period with the outputs that acted in it.
+                            self.counters.missing_az += 1;
+                            return;
+                        }
+                    }
+                }
                 let Some(prev_u) = r.prev_u.replace(u) else {
                     // A new take-off (or the first sample): no residual spans what came before.
                     r.diag.residual_gap();
@@ -606,19 +627,6 @@ impl VehiclePipeline {
                     r.rates_prev = [s.rates; 2];
                     return;
                 };
-                let mut y = [0.0; 4];
-                y[..3].copy_from_slice(&s.rates);
-                if r.m == 4 {
-                    match s.az {
-                        Some(a) => y[3] = a,
-                        None => {
-                            // Skipped: the next sample follows a gap (last_t stays), and the
-                            // filters coast over this period.
-                            self.counters.missing_az += 1;
-                            return;
-                        }
-                    }
-                }
                 // The same limit as the calibration's: a lost sample is a gap.
                 let span = s.t - r.last_t;
                 let gap = span > 1.5 * r.dt;
@@ -635,6 +643,7 @@ impl VehiclePipeline {
                         // held, so this measurement meets the state at its own time (stepping
                         // across the hole as one period left its rate change to the gains).
                         let lost = ((span / r.dt).round() as usize).saturating_sub(1);
+                        self.counters.coasted += lost as u64;
                         for _ in 0..lost {
                             let input = r.push_command(prev_u);
                             let res = r.filters.coast(&input[..r.n_in()]);
@@ -657,8 +666,9 @@ impl VehiclePipeline {
                 let res = r.filters.step(&input[..n_in], &y[..r.m]);
                 r.since_gap += 1;
                 // Only once the commands that acted and the increment are measured ones, one
-                // period apart (after a gap or take-off the delayed commands are stand-ins for
-                // `delay` steps, and an identified model's increment spans the gap for one more).
+                // period apart (after a gap or take-off the delayed commands are held outputs or
+                // stand-ins for `delay` steps, and an identified model's increment spans the gap
+                // for one more).
                 let own_inputs = r.since_gap > (r.delay + 1).max(if r.exogenous { 2 } else { 0 });
                 if !gap && own_inputs {
                     let residual =
@@ -1130,11 +1140,51 @@ mod tests {
         assert_eq!(c.missing_output, each, "{c:?}");
         // One gap after each lost sample, each sample without a_z and each without outputs.
         assert_eq!(c.gaps, 3 * each, "{c:?}");
-        // And no filter step for any of the three.
+        // And no filter step for any of the three: the filters coast over each period.
         assert_eq!(clean.counters.steps - c.steps, 3 * each, "{c:?}");
+        assert_eq!(c.coasted, 3 * each, "{c:?}");
+        assert_eq!(clean.counters.coasted, 0);
+        assert_eq!(c.filter_errors, 0, "{c:?}");
         let warnings: Vec<_> = said.0.iter().filter(|m| m.contains("no PWM")).collect();
         assert_eq!(warnings.len(), 1, "{:?}", said.0);
         assert!(warnings[0].contains("channel 3"), "{}", warnings[0]);
+    }
+
+    /// The filters coast over each period of a short hole (5 samples, 0.12 s between the
+    /// samples either side), and not over a long one (25 samples, 0.52 s): that one is stepped
+    /// across, as the held outputs are too far from what the autopilot sent by then.
+    #[test]
+    fn short_holes_are_coasted_over_and_long_ones_stepped_across() {
+        let lost = std::cell::RefCell::new(vec![]);
+        let (p, said, _) = fly_quad_with(|k, estimating| match k % 200 {
+            _ if !estimating => Damage::Intact,
+            100..125 | 150..155 => {
+                lost.borrow_mut().push(k);
+                Damage::Lost
+            }
+            _ => Damage::Intact,
+        });
+        assert!(matches!(p.stage, Stage::Running(_)), "{:?}", said.0);
+        // The holes while estimating (the first may have begun before), by length.
+        let mut holes: Vec<usize> = vec![];
+        for (i, k) in lost.borrow().iter().enumerate() {
+            if i > 0 && lost.borrow()[i - 1] + 1 == *k {
+                *holes.last_mut().unwrap() += 1;
+            } else {
+                holes.push(1);
+            }
+        }
+        // Coasted: a hole of n lost samples spans (n + 1) periods; up to 0.3 s, n <= 14.
+        let short = holes.iter().filter(|n| **n <= 14).count();
+        assert!(
+            short >= 3 && holes.iter().filter(|n| **n == 25).count() >= 3,
+            "{holes:?}"
+        );
+        let c = p.counters;
+        assert_eq!(c.gaps, holes.len() as u64, "{c:?} {holes:?}");
+        let coasted: usize = holes.iter().filter(|n| **n <= 14).sum();
+        assert_eq!(c.coasted, coasted as u64, "{c:?} {holes:?}");
+        assert_eq!(c.filter_errors, 0, "{c:?}");
     }
 
     /// A calibration stretch too holed to fit: said, and the next stretch calibrates.

@@ -683,7 +683,7 @@ fn summary_count(summary: &str, label: &str) -> u64 {
     summary
         .split(label)
         .next()
-        .and_then(|s| s.rsplit([',', ';']).next())
+        .and_then(|s| s.rsplit([',', ';', '(']).next())
         .and_then(|n| n.trim().parse().ok())
         .unwrap_or_else(|| panic!("the summary counts {label}: {summary}"))
 }
@@ -969,6 +969,11 @@ delta = 0.15
         let lossy = randomly_lossy_copy(&whole, 0.2, seed, &format!("cli_random_loss_{seed}"));
         let (out, _, faults) = replay_faults(&lossy);
         assert!(summary_count(&out, "gaps while estimating") > 300, "{out}");
+        assert!(
+            summary_count(&out, "lost periods coasted over") > 300,
+            "{out}"
+        );
+        assert_eq!(summary_count(&out, "filter resets"), 0, "{out}");
         let first = faults.first().expect("the aileron bias is decided");
         let t = first["t"].as_f64().unwrap();
         assert!((45.0..47.0).contains(&t), "seed {seed}: decided at {t} s");

@@ -466,7 +466,7 @@ fn mit_ukf_sensitivity_across_coasts_matches_finite_differences() {
 /// differences of J (innovations and linearisation points held, as by the MIT rule).
 #[test]
 fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
-    use ahcmon::estimate::predict_shape;
+    use ahcmon::estimate::{AdaptationParams, MitEsmf, predict_shape};
     let m = model(false);
     let data = samples(150, NoiseKind::Uniform, 0.03, 2.94e-3);
     let mut f = esmf(m.clone());
@@ -474,17 +474,40 @@ fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
         f.try_step(&s.u, &s.y).unwrap();
     }
     let p_start = f.p;
+    // The MIT-ESMF itself over the same steps, adaptation off, every entry's sensitivity kept:
+    // its own coasts must carry what the replay below carries.
+    let mut mit = MitEsmf::new(
+        m.clone(),
+        EsmfParams::default(),
+        AdaptationParams {
+            forgetting: 1.0,
+            eta0: 0.0,
+            eta_min: 0.0,
+            ..AdaptationParams::default()
+        },
+        x0(),
+        set_p0(),
+        f.process_noise,
+        f.r,
+    );
+    mit.esmf = f.clone();
+    mit.fixed = [false; 5];
     let mut rec = vec![];
+    let mut shapes = vec![];
     for (k, s) in data[100..150].iter().enumerate() {
         if lost(k) {
             f.coast(&s.u).unwrap();
+            mit.coast(&s.u).unwrap();
             rec.push((f.last_a, None));
         } else {
             let o = f.try_step(&s.u, &s.y).unwrap();
             assert!(o.consistent && o.inflations == 0 && !o.jumped, "{o:?}");
+            mit.try_step(&s.u, &s.y).unwrap();
             rec.push((f.last_a, Some(f.innovation)));
         }
+        shapes.push(f.p);
     }
+    assert_eq!(mit.esmf.p, f.p, "the MIT-ESMF ran the same sets");
     let (h, r, rl, q) = (m.h_matrix(&[]), f.r, f.r_sqrt_lmax(), f.process_noise);
     let terms = m.bilinear_terms();
     let run = |q: &SVector<f64, 5>,
@@ -493,7 +516,11 @@ fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
         let mut p = p_start;
         let mut g = SVector::zeros();
         let mut j = 0.0;
-        for (a, e) in &rec {
+        for (k, (a, e)) in rec.iter().enumerate() {
+            if k > 0 && *q == f.process_noise {
+                // The replay is the filter's own run.
+                assert!((p - shapes[k - 1]).amax() <= 1e-12 * p.amax(), "step {k}");
+            }
             let (_, half) = remainder_box(terms, &p);
             let mut st = ShapeStep::zeros();
             match e {
@@ -519,6 +546,19 @@ fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
     };
     let mut sens = ShapeSensitivity::<5>::new();
     let (_, g) = run(&q, Some(&mut sens));
+    for i in 0..5 {
+        let d = &mit.sensitivity.dp[i];
+        let err = (d - sens.dp[i]).amax() / sens.dp[i].amax();
+        assert!(
+            err <= 1e-9,
+            "MIT-ESMF dP/dq{i} differs from the replay by {err:e}"
+        );
+    }
+    assert!(
+        (mit.gradient - g).amax() <= 1e-9 * g.amax(),
+        "{} vs {g}",
+        mit.gradient
+    );
     let scale = g.amax();
     for i in 0..5 {
         let hh = 1e-5 * q[i];

@@ -227,7 +227,8 @@ impl<const N: usize> ShapeSensitivity<N> {
     }
 
     /// `dP/dq_i` carried through a prediction without an update (a coast over a lost sample,
-    /// whose set is `Π`): the exact derivative of the Minkowski sum, betas included. `st` holds
+    /// whose set is `Π`): the exact derivative of the Minkowski sum, betas included (before the
+    /// a priori box cut, which no sensitivity differentiates, after a step either). `st` holds
     /// the prediction's quantities (`predict_shape`), `p_prev` the shape it started from.
     pub fn propagate_prediction<const M: usize>(
         &mut self,
