@@ -185,7 +185,11 @@ fn vehicle_filter_steps_allocate_nothing() {
     let mut quad = FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, 0.02).unwrap());
     let n = count(|| {
         for (k, s) in samples.iter().enumerate() {
-            // One sample in five lost: a coast (prediction only) instead of a step.
+            // One sample in five lost: a coast (prediction only) instead of a step; now and
+            // then an outage, after which the rates are re-measured.
+            if k % 100 == 50 {
+                quad.reseat(&[s.y[0], s.y[1], s.y[2]], 25.0);
+            }
             let r = if k % 5 == 4 {
                 quad.coast(&s.u[..4])
             } else {
@@ -194,7 +198,10 @@ fn vehicle_filter_steps_allocate_nothing() {
             assert!(r.iter().all(|r| r.is_ok()));
         }
     });
-    assert_eq!(n, 0, "quad: {n} allocations in 1000 steps and coasts");
+    assert_eq!(
+        n, 0,
+        "quad: {n} allocations in 1000 steps, coasts and reseats"
+    );
     // Eight actuators: the quad's motors twice over (an X8-like coaxial layout).
     let mut octo = profile.clone();
     let mut extra = octo.actuators.clone();

@@ -202,3 +202,68 @@ fn coasted_set_contains_every_reachable_point() {
     // Not vacuous: the set is not much larger than what it must hold.
     assert!(worst > 0.5, "{worst}");
 }
+
+/// After an outage the ESMF re-measures the rates (`reseat`): every point whose rates lie in
+/// the measurement set about the new rates, and whose gain and bias lie in the old set's
+/// projection plus `periods` steps of process noise, is inside the new set.
+#[test]
+fn reseated_set_contains_every_consistent_point() {
+    let n = BankNoise::nominal(
+        &NoiseSchedule::constant(NoiseKind::Uniform, 0.03),
+        &NoiseSchedule::constant(NoiseKind::Uniform, 0.025),
+    );
+    let m = PaperHeli::new(paper_params(10.0), 0.02);
+    let mut f = Esmf::new(
+        m.clone(),
+        EsmfParams::default(),
+        x0(),
+        set_p0(),
+        n.set_q(),
+        n.set_r(),
+    );
+    f.x = SVector::from([0.4, -0.3, 0.5, 0.9, 0.01]);
+    f.p = SMatrix::from_diagonal(&SVector::from([0.04, 0.03, 0.05, 0.05, 1e-4]));
+    f.p[(3, 4)] = 0.001;
+    f.p[(4, 3)] = 0.001;
+    let (x_prev, p_prev) = (f.x, f.p);
+    let rates = [0.1, 0.2, -0.1];
+    let r = n.set_r();
+    let half_sq = [r[(0, 0)], r[(1, 1)], r[(2, 2)]];
+    let periods = 10.0;
+    f.reseat(&rates, &half_sq, periods);
+    let mut rng = Rng::new(13);
+    let l_ahc = p_prev
+        .fixed_view::<2, 2>(3, 3)
+        .into_owned()
+        .cholesky()
+        .unwrap()
+        .l();
+    let q = n.set_q();
+    let l_q = SMatrix::<f64, 2, 2>::from_diagonal(&SVector::from([q[3], q[4]]))
+        .cholesky()
+        .unwrap()
+        .l();
+    let l_r = SMatrix::<f64, 3, 3>::from_diagonal(&SVector::from(half_sq))
+        .cholesky()
+        .unwrap()
+        .l();
+    let p_inv = f.p.try_inverse().unwrap();
+    let mut worst = 0.0f64;
+    for _ in 0..20_000 {
+        let mut ahc = in_ellipsoid(&mut rng, &x_prev.fixed_rows::<2>(3).into_owned(), &l_ahc);
+        for _ in 0..periods as usize {
+            ahc += in_ellipsoid(&mut rng, &SVector::zeros(), &l_q);
+        }
+        let rt = in_ellipsoid(&mut rng, &SVector::from(rates), &l_r);
+        let z = SVector::<f64, 5>::from([rt[0], rt[1], rt[2], ahc[0], ahc[1]]);
+        let d = z - f.x;
+        worst = worst.max(d.dot(&(p_inv * d)));
+    }
+    println!("20000 consistent points; largest (z-x)ᵀP⁻¹(z-x) = {worst:.4}");
+    assert!(
+        worst <= 1.0 + 1e-9,
+        "a consistent point lies outside: {worst}"
+    );
+    assert!(worst > 0.3, "{worst}");
+    assert_eq!(&f.x.as_slice()[..3], &rates);
+}

@@ -567,6 +567,51 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         Ok(())
     }
 
+    /// After an outage too long to coast over (the outputs over it unknown): the first
+    /// `rates.len()` coordinates are re-measured, within the measurement set `half_sq` (squared
+    /// half-widths) about `rates`; the rest stay in their projection, grown by `periods` steps
+    /// of the process set (the Minkowski sum of `periods` copies, `periods²` Q). The new set is
+    /// the trace-optimal ellipsoid about the product of the two.
+    pub fn reseat(&mut self, rates: &[f64], half_sq: &[f64], periods: f64) {
+        let k = rates.len().min(half_sq.len()).min(N);
+        let mut rest = SMatrix::<f64, N, N>::zeros();
+        let mut grown = SVector::<f64, N>::zeros();
+        for i in k..N {
+            for j in k..N {
+                rest[(i, j)] = self.p[(i, j)];
+            }
+            grown[i] = periods * periods * self.process_noise[i];
+        }
+        // Projection ⊕ growth (trace-optimal β), then ⊗ the rates' set (trace-optimal λ).
+        let (tr_p, tr_g) = (rest.trace().max(0.0).sqrt(), grown.sum().max(0.0).sqrt());
+        if tr_g > 0.0 && tr_p > 0.0 {
+            let beta = tr_g / (tr_p + tr_g);
+            rest /= 1.0 - beta;
+            for i in k..N {
+                rest[(i, i)] += grown[i] / beta;
+            }
+        } else {
+            for i in k..N {
+                rest[(i, i)] += grown[i];
+            }
+        }
+        let tr_r: f64 = half_sq[..k].iter().sum::<f64>().max(0.0).sqrt();
+        let tr_rest = rest.trace().max(0.0).sqrt();
+        let lambda = if tr_r + tr_rest > 0.0 {
+            tr_r / (tr_r + tr_rest)
+        } else {
+            0.5
+        };
+        self.p = rest / (1.0 - lambda);
+        for i in 0..k {
+            self.x[i] = rates[i];
+            self.p[(i, i)] = half_sq[i] / lambda;
+        }
+        symmetrize(&mut self.p);
+        self.inconsistent_run = 0;
+        self.intersect_box();
+    }
+
     /// Bounds of coordinate `i`: the set's projection `x_i ± √P_ii` (exact support function),
     /// clipped to the a priori box where there is one. The truth lies in both; the box cuts
     /// keep the set near the box but, being outer ellipsoids, not inside it.

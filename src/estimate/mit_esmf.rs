@@ -371,6 +371,16 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
     }
 }
 
+impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
+    /// [`Esmf::reseat`]; the new set is not one the sensitivities describe, so they start over
+    /// (as after a jump or a reset).
+    pub fn reseat(&mut self, rates: &[f64], half_sq: &[f64], periods: f64) {
+        self.esmf.reseat(rates, half_sq, periods);
+        self.sensitivity.clear();
+        self.gradient = SVector::zeros();
+    }
+}
+
 impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for MitEsmf<Mo, N, M> {
     fn name(&self) -> &'static str {
         "mit-esmf"

@@ -142,6 +142,32 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         Ok(())
     }
 
+    /// [`Ukf::reseat`], with the sensitivities of what it sets: the re-measured rates no longer
+    /// depend on q (their rows and columns are cleared), the rest carry `periods` more steps of
+    /// their own entry.
+    pub fn reseat(&mut self, rates: &[f64], var: &[f64], periods: f64) {
+        self.ukf.reseat(rates, var, periods);
+        let k = rates.len().min(var.len()).min(N);
+        let clear = |m: &mut SMatrix<f64, N, N>| {
+            for i in 0..k {
+                for j in 0..N {
+                    m[(i, j)] = 0.0;
+                    m[(j, i)] = 0.0;
+                }
+            }
+        };
+        for (i, m) in self.sensitivity.m.iter_mut().enumerate() {
+            clear(m);
+            if i >= k && !self.fixed[i] {
+                m[(i, i)] += periods;
+            }
+        }
+        clear(&mut self.fixed_sum);
+        for i in (k..N).filter(|&i| self.fixed[i]) {
+            self.fixed_sum[(i, i)] += periods * self.ukf.process_noise[i];
+        }
+    }
+
     /// Restart the step-size schedule (called by diagnosis when a fault decision fires).
     pub fn restart_adaptation(&mut self) {
         self.schedule.restart();

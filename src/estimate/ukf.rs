@@ -271,6 +271,26 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         r
     }
 
+    /// After an outage too long to coast over (the outputs over it unknown): the first `k`
+    /// coordinates (the rates) are re-measured rather than predicted, `rates` with variance
+    /// `var` and no correlation with the rest; the rest keep their estimate, its variance grown
+    /// by `periods` steps of their random walk.
+    pub fn reseat(&mut self, rates: &[f64], var: &[f64], periods: f64) {
+        let k = rates.len().min(var.len()).min(N);
+        for i in 0..k {
+            self.x[i] = rates[i];
+            for j in 0..N {
+                self.p[(i, j)] = 0.0;
+                self.p[(j, i)] = 0.0;
+            }
+            self.p[(i, i)] = var[i];
+        }
+        for i in k..N {
+            self.p[(i, i)] += periods * self.process_noise[i];
+        }
+        self.gain = SMatrix::zeros();
+    }
+
     /// ±3σ bounds of coordinate `i`.
     pub fn three_sigma(&self, i: usize) -> (f64, f64) {
         let s = 3.0 * self.p[(i, i)].max(0.0).sqrt();

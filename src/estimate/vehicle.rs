@@ -80,6 +80,10 @@ pub trait VehicleFilters: Send {
     /// that acted then (`u` as for `step`). Then the next `step` compares its measurement
     /// with the state at its own time instead of stepping one period across the hole.
     fn coast(&mut self, u: &[f64]) -> [Result<(), EstimatorError>; 2];
+    /// Both filters after an outage too long to coast over: the rates are re-measured
+    /// (`rates`, within the measurement noise) instead of predicted over outputs nobody saw,
+    /// and the gains and biases keep their estimates, `periods` steps more uncertain.
+    fn reseat(&mut self, rates: &[f64; 3], periods: f64);
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate;
     /// What the healthy model (gamma = 1, delta = 0) fails to predict of `y` from the previous
     /// measured rates and this step's inputs (same `u` as `step`): `[p, q, r(, a_z)]`, unweighted.
@@ -376,6 +380,13 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
     }
     fn coast(&mut self, u: &[f64]) -> [Result<(), EstimatorError>; 2] {
         [self.ukf.coast(u), self.esmf.coast(u)]
+    }
+    fn reseat(&mut self, rates: &[f64; 3], periods: f64) {
+        let (r, sr) = (&self.setup.kalman_r, &self.setup.set_r);
+        self.ukf
+            .reseat(rates, &[r[(0, 0)], r[(1, 1)], r[(2, 2)]], periods);
+        self.esmf
+            .reseat(rates, &[sr[(0, 0)], sr[(1, 1)], sr[(2, 2)]], periods);
     }
     fn healthy_residual(&self, rates_prev: &[f64; 3], u: &[f64], y: &[f64]) -> [f64; 4] {
         use crate::model::Model;
