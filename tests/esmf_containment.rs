@@ -22,8 +22,9 @@ fn in_ellipsoid<const N: usize>(
     c + l * (d * radius)
 }
 
-#[test]
-fn updated_set_contains_every_consistent_point() {
+/// The paper helicopter's ESMF (uniform noise) with a prior of sizeable rates, so the
+/// gyroscopic linearisation error matters, correlated in roll and pitch and in gain and bias.
+fn prior_set() -> (PaperHeli, BankNoise, Esmf<PaperHeli, 5, 3>) {
     let n = BankNoise::nominal(
         &NoiseSchedule::constant(NoiseKind::Uniform, 0.03),
         &NoiseSchedule::constant(NoiseKind::Uniform, 0.025),
@@ -37,11 +38,18 @@ fn updated_set_contains_every_consistent_point() {
         n.set_q(),
         n.set_r(),
     );
-    // A prior with sizeable rates, so the gyroscopic linearisation error matters.
     f.x = SVector::from([0.4, -0.3, 0.5, 0.9, 0.01]);
     f.p = SMatrix::from_diagonal(&SVector::from([0.04, 0.03, 0.05, 0.05, 1e-4]));
-    f.p[(0, 1)] = 0.01;
-    f.p[(1, 0)] = 0.01;
+    for (i, j, v) in [(0, 1, 0.01), (3, 4, 0.001)] {
+        f.p[(i, j)] = v;
+        f.p[(j, i)] = v;
+    }
+    (m, n, f)
+}
+
+#[test]
+fn updated_set_contains_every_consistent_point() {
+    let (m, n, mut f) = prior_set();
     let (x_prev, p_prev) = (f.x, f.p);
     let u = [0.1, 0.01, -0.06, 0.05];
     let mut rng = Rng::new(11);
@@ -159,23 +167,7 @@ fn bounds_are_clipped_to_the_a_priori_box() {
 /// predicted set.
 #[test]
 fn coasted_set_contains_every_reachable_point() {
-    let n = BankNoise::nominal(
-        &NoiseSchedule::constant(NoiseKind::Uniform, 0.03),
-        &NoiseSchedule::constant(NoiseKind::Uniform, 0.025),
-    );
-    let m = PaperHeli::new(paper_params(10.0), 0.02);
-    let mut f = Esmf::new(
-        m.clone(),
-        EsmfParams::default(),
-        x0(),
-        set_p0(),
-        n.set_q(),
-        n.set_r(),
-    );
-    f.x = SVector::from([0.4, -0.3, 0.5, 0.9, 0.01]);
-    f.p = SMatrix::from_diagonal(&SVector::from([0.04, 0.03, 0.05, 0.05, 1e-4]));
-    f.p[(0, 1)] = 0.01;
-    f.p[(1, 0)] = 0.01;
+    let (m, n, mut f) = prior_set();
     let (x_prev, p_prev) = (f.x, f.p);
     let u = [0.1, 0.01, -0.06, 0.05];
     f.coast(&u).unwrap();
@@ -208,23 +200,7 @@ fn coasted_set_contains_every_reachable_point() {
 /// projection plus `periods` steps of process noise, is inside the new set.
 #[test]
 fn reseated_set_contains_every_consistent_point() {
-    let n = BankNoise::nominal(
-        &NoiseSchedule::constant(NoiseKind::Uniform, 0.03),
-        &NoiseSchedule::constant(NoiseKind::Uniform, 0.025),
-    );
-    let m = PaperHeli::new(paper_params(10.0), 0.02);
-    let mut f = Esmf::new(
-        m.clone(),
-        EsmfParams::default(),
-        x0(),
-        set_p0(),
-        n.set_q(),
-        n.set_r(),
-    );
-    f.x = SVector::from([0.4, -0.3, 0.5, 0.9, 0.01]);
-    f.p = SMatrix::from_diagonal(&SVector::from([0.04, 0.03, 0.05, 0.05, 1e-4]));
-    f.p[(3, 4)] = 0.001;
-    f.p[(4, 3)] = 0.001;
+    let (_, n, mut f) = prior_set();
     let (x_prev, p_prev) = (f.x, f.p);
     let rates = [0.1, 0.2, -0.1];
     let r = n.set_r();

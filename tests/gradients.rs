@@ -250,18 +250,28 @@ fn mit_esmf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
     };
     let mut sens = ShapeSensitivity::<5>::new();
     let (_, g) = run(&q, Some(&mut sens));
+    check_esmf_gradient("50-step", &q, &g, |q| run(q, None).0);
+}
+
+/// A J(q) gradient `g` against central differences of `j` (steps of 1e-5 q_i), to 1e-5.
+fn check_esmf_gradient(
+    what: &str,
+    q: &SVector<f64, 5>,
+    g: &SVector<f64, 5>,
+    j: impl Fn(&SVector<f64, 5>) -> f64,
+) {
     let scale = g.amax();
     for i in 0..5 {
         let hh = 1e-5 * q[i];
-        let mut qp = q;
+        let mut qp = *q;
         qp[i] += hh;
-        let mut qm = q;
+        let mut qm = *q;
         qm[i] -= hh;
-        let fd = (run(&qp, None).0 - run(&qm, None).0) / (2.0 * hh);
+        let fd = (j(&qp) - j(&qm)) / (2.0 * hh);
         let err = rel_err(g[i], fd, scale);
         println!(
-            "50-step ESMF q{i}: analytic {:.6e} fd {:.6e} rel {err:.2e}",
-            g[i], fd
+            "{what} ESMF q{i}: analytic {:.6e} fd {fd:.6e} rel {err:.2e}",
+            g[i]
         );
         assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
     }
@@ -396,52 +406,44 @@ fn mit_esmf_recursive_sensitivity_on_the_quad_model_matches_finite_differences()
     }
 }
 
-/// Steps 100..150 of the run, one in four lost (a coast: prediction only); the last step is
-/// an update, whose S and J the differences compare.
-fn lost(k: usize) -> bool {
-    k % 4 == 2
-}
-
-/// Across coasts over lost samples the MIT-UKF's sensitivity is still `dP⁻/dq_i`: after 50
-/// steps, one in four coasted, `H M_i Hᵀ` matches central differences of S in q_i. Adaptation
-/// is switched off (step size 0), so the MIT-UKF is the UKF the differences run.
-#[test]
-fn mit_ukf_sensitivity_across_coasts_matches_finite_differences() {
+/// An MIT-UKF with its adaptation off (step size 0, no forgetting) after steps 0..100 of
+/// `data`, its sensitivity started afresh there: the differences below perturb q from step 100.
+fn frozen_mit_ukf(
+    m: &PaperHeli,
+    data: &[PaperSample],
+) -> ahcmon::estimate::MitUkf<PaperHeli, 5, 3, 11> {
     use ahcmon::estimate::{AdaptationParams, MitUkf};
-    let m = model(true); // linear: P⁻ does not depend on the state
-    let data = samples(150, NoiseKind::Gaussian, 1e-4, 2.89e-6);
     let n = noise(NoiseKind::Gaussian, 1e-4, 2.89e-6);
-    let q = n.kalman_q();
     let frozen = AdaptationParams {
         forgetting: 1.0,
         eta0: 0.0,
         eta_min: 0.0,
         ..AdaptationParams::default()
     };
-    let mut base = MitUkf::<_, 5, 3, 11>::new(
+    let mut f = MitUkf::new(
         m.clone(),
         UkfParams::default(),
         frozen,
         x0(),
         kalman_p0(),
-        q,
+        n.kalman_q(),
         n.kalman_r(),
     );
     for s in &data[..100] {
-        base.try_step(&s.u, &s.y).unwrap();
+        f.try_step(&s.u, &s.y).unwrap();
     }
-    // The differences perturb q from step 100 on: so does the sensitivity.
-    base.sensitivity = Sensitivity::new();
-    let run = |f: &mut MitUkf<PaperHeli, 5, 3, 11>| {
-        for (k, s) in data[100..150].iter().enumerate() {
-            if lost(k) {
-                f.coast(&s.u).unwrap();
-            } else {
-                f.try_step(&s.u, &s.y).unwrap();
-            }
-        }
-        f.ukf.s
-    };
+    f.sensitivity = Sensitivity::new();
+    f
+}
+
+/// `H M_i Hᵀ` of the MIT-UKF after `run` against central differences of its final S in q_i.
+fn check_sensitivity_against_differences(
+    what: &str,
+    m: &PaperHeli,
+    base: &ahcmon::estimate::MitUkf<PaperHeli, 5, 3, 11>,
+    run: impl Fn(&mut ahcmon::estimate::MitUkf<PaperHeli, 5, 3, 11>) -> SMatrix<f64, 3, 3>,
+) {
+    let q = base.ukf.process_noise;
     let mut f = base.clone();
     run(&mut f);
     assert_eq!(f.ukf.process_noise, q, "the adaptation is off");
@@ -456,9 +458,35 @@ fn mit_ukf_sensitivity_across_coasts_matches_finite_differences() {
         let ds_fd = (s_of(1.0) - s_of(-1.0)) / (2.0 * step);
         let hmh = h * f.sensitivity.m[i] * h.transpose();
         let err = (ds_fd - hmh).amax() / hmh.amax();
-        println!("coasted UKF q{i}: dS/dq rel {err:.2e}");
+        println!("{what} UKF q{i}: dS/dq rel {err:.2e}");
         assert!(err <= 1e-5, "q{i}: dS/dq differs by {err:e}");
     }
+}
+
+/// Steps 100..150 of the run, one in four lost (a coast: prediction only); the last step is
+/// an update, whose S and J the differences compare.
+fn lost(k: usize) -> bool {
+    k % 4 == 2
+}
+
+/// Across coasts over lost samples the MIT-UKF's sensitivity is still `dP⁻/dq_i`: after 50
+/// steps, one in four coasted, `H M_i Hᵀ` matches central differences of S in q_i. Adaptation
+/// is switched off (step size 0), so the MIT-UKF is the UKF the differences run.
+#[test]
+fn mit_ukf_sensitivity_across_coasts_matches_finite_differences() {
+    let m = model(true); // linear: P⁻ does not depend on the state
+    let data = samples(150, NoiseKind::Gaussian, 1e-4, 2.89e-6);
+    let base = frozen_mit_ukf(&m, &data);
+    check_sensitivity_against_differences("coasted", &m, &base, |f| {
+        for (k, s) in data[100..150].iter().enumerate() {
+            if lost(k) {
+                f.coast(&s.u).unwrap();
+            } else {
+                f.try_step(&s.u, &s.y).unwrap();
+            }
+        }
+        f.ukf.s
+    });
 }
 
 /// The same for the MIT-ESMF: its sensitivity through a coast is the exact derivative of the
@@ -559,21 +587,7 @@ fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
         "{} vs {g}",
         mit.gradient
     );
-    let scale = g.amax();
-    for i in 0..5 {
-        let hh = 1e-5 * q[i];
-        let mut qp = q;
-        qp[i] += hh;
-        let mut qm = q;
-        qm[i] -= hh;
-        let fd = (run(&qp, None).0 - run(&qm, None).0) / (2.0 * hh);
-        let err = rel_err(g[i], fd, scale);
-        println!(
-            "coasted 50-step ESMF q{i}: analytic {:.6e} fd {fd:.6e} rel {err:.2e}",
-            g[i]
-        );
-        assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
-    }
+    check_esmf_gradient("coasted 50-step", &q, &g, |q| run(q, None).0);
 }
 
 /// After an outage the MIT-UKF re-measures its rates (`reseat`): its sensitivity is still
@@ -581,52 +595,16 @@ fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
 /// AHC variances by `periods` q_i included).
 #[test]
 fn mit_ukf_sensitivity_across_a_reseat_matches_finite_differences() {
-    use ahcmon::estimate::{AdaptationParams, MitUkf};
     let m = model(true);
     let data = samples(140, NoiseKind::Gaussian, 1e-4, 2.89e-6);
-    let n = noise(NoiseKind::Gaussian, 1e-4, 2.89e-6);
-    let (q, r) = (n.kalman_q(), n.kalman_r());
-    let frozen = AdaptationParams {
-        forgetting: 1.0,
-        eta0: 0.0,
-        eta_min: 0.0,
-        ..AdaptationParams::default()
-    };
-    let mut base = MitUkf::<_, 5, 3, 11>::new(
-        m.clone(),
-        UkfParams::default(),
-        frozen,
-        x0(),
-        kalman_p0(),
-        q,
-        r,
-    );
-    for s in &data[..100] {
-        base.try_step(&s.u, &s.y).unwrap();
-    }
-    base.sensitivity = Sensitivity::new();
+    let base = frozen_mit_ukf(&m, &data);
+    let r = base.ukf.r;
     let var = [r[(0, 0)], r[(1, 1)], r[(2, 2)]];
-    let run = |f: &mut MitUkf<PaperHeli, 5, 3, 11>| {
+    check_sensitivity_against_differences("reseated", &m, &base, |f| {
         f.reseat(data[109].y.as_slice(), &var, 10.0);
         for s in &data[110..140] {
             f.try_step(&s.u, &s.y).unwrap();
         }
         f.ukf.s
-    };
-    let mut f = base.clone();
-    run(&mut f);
-    let h = m.h_matrix(&[]);
-    for i in 0..5 {
-        let step = 1e-4 * q[i];
-        let s_of = |sign: f64| {
-            let mut g = base.clone();
-            g.ukf.process_noise[i] += sign * step;
-            run(&mut g)
-        };
-        let ds_fd = (s_of(1.0) - s_of(-1.0)) / (2.0 * step);
-        let hmh = h * f.sensitivity.m[i] * h.transpose();
-        let err = (ds_fd - hmh).amax() / hmh.amax();
-        println!("reseated UKF q{i}: dS/dq rel {err:.2e}");
-        assert!(err <= 1e-5, "q{i}: dS/dq differs by {err:e}");
-    }
+    });
 }
