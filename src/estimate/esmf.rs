@@ -573,6 +573,11 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
     /// of the process set (the Minkowski sum of `periods` copies, `periods²` Q). The new set is
     /// the trace-optimal ellipsoid about the product of the two.
     pub fn reseat(&mut self, rates: &[f64], half_sq: &[f64], periods: f64) {
+        let periods = if periods.is_finite() {
+            periods.max(0.0)
+        } else {
+            0.0
+        };
         let k = rates.len().min(half_sq.len()).min(N);
         let mut rest = SMatrix::<f64, N, N>::zeros();
         let mut grown = SVector::<f64, N>::zeros();
@@ -597,8 +602,10 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
         }
         let tr_r: f64 = half_sq[..k].iter().sum::<f64>().max(0.0).sqrt();
         let tr_rest = rest.trace().max(0.0).sqrt();
+        // Kept off 0 and 1: a zero-width part (no measurement noise, a point AHC set) would
+        // divide by zero.
         let lambda = if tr_r + tr_rest > 0.0 {
-            tr_r / (tr_r + tr_rest)
+            (tr_r / (tr_r + tr_rest)).clamp(1e-9, 1.0 - 1e-9)
         } else {
             0.5
         };

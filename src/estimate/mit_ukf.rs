@@ -146,6 +146,16 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     /// depend on q (their rows and columns are cleared), the rest carry `periods` more steps of
     /// their own entry.
     pub fn reseat(&mut self, rates: &[f64], var: &[f64], periods: f64) {
+        // The sensitivities are of the last prediction (dP⁻/dq); the reseat starts from the
+        // updated covariance, so carry them through that update first: (I - K H) M (I - K H)ᵀ
+        // (the identity after a coast or a reseat, whose gain is zero).
+        let update = GainTransition::new(&SMatrix::identity(), &self.ukf.gain, &self.ukf.h);
+        for (i, m) in self.sensitivity.m.iter_mut().enumerate() {
+            if !self.fixed[i] {
+                *m = update.sandwich(m);
+            }
+        }
+        self.fixed_sum = update.sandwich(&self.fixed_sum);
         self.ukf.reseat(rates, var, periods);
         let k = rates.len().min(var.len()).min(N);
         let clear = |m: &mut SMatrix<f64, N, N>| {
