@@ -163,6 +163,15 @@ fn esmf(m: PaperHeli) -> Esmf<PaperHeli, 5, 3> {
     )
 }
 
+/// The paper model's ESMF after steps 0..100 of `data` (the differences start from there).
+fn esmf_after_100_steps(m: &PaperHeli, data: &[PaperSample]) -> Esmf<PaperHeli, 5, 3> {
+    let mut f = esmf(m.clone());
+    for s in &data[..100] {
+        f.try_step(&s.u, &s.y).unwrap();
+    }
+    f
+}
+
 #[test]
 fn mit_esmf_one_step_gradient_matches_finite_differences() {
     let m = model(false); // with the gyroscopic terms: the linearisation-error set is non-zero
@@ -217,10 +226,7 @@ fn mit_esmf_recursive_sensitivity_matches_finite_differences_over_50_steps() {
     // Held fixed, as by the MIT rule: the innovations and linearisation points of a nominal run.
     let m = model(false);
     let data = samples(150, NoiseKind::Uniform, 0.03, 2.94e-3);
-    let mut f = esmf(m.clone());
-    for s in &data[..100] {
-        f.try_step(&s.u, &s.y).unwrap();
-    }
+    let mut f = esmf_after_100_steps(&m, &data);
     let p_start = f.p;
     let mut rec = vec![];
     for s in &data[100..150] {
@@ -497,10 +503,7 @@ fn mit_esmf_sensitivity_across_coasts_matches_finite_differences() {
     use ahcmon::estimate::{AdaptationParams, MitEsmf, predict_shape};
     let m = model(false);
     let data = samples(150, NoiseKind::Uniform, 0.03, 2.94e-3);
-    let mut f = esmf(m.clone());
-    for s in &data[..100] {
-        f.try_step(&s.u, &s.y).unwrap();
-    }
+    let mut f = esmf_after_100_steps(&m, &data);
     let p_start = f.p;
     // The MIT-ESMF itself over the same steps, adaptation off, every entry's sensitivity kept:
     // its own coasts must carry what the replay below carries.

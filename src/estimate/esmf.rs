@@ -246,24 +246,8 @@ pub fn add_jump_set<const N: usize>(
     p0: &SMatrix<f64, N, N>,
     from: usize,
 ) {
-    let tr_j: f64 = (from..N).map(|i| p0[(i, i)].max(0.0)).sum();
-    let tr_p = p.trace().max(0.0);
-    if tr_j <= 0.0 {
-        return;
-    }
-    if tr_p <= 0.0 {
-        // A degenerate (point) set: the sum is the jump set itself.
-        *p = SMatrix::zeros();
-        for i in from..N {
-            p[(i, i)] = p0[(i, i)].max(0.0);
-        }
-        return;
-    }
-    let beta = tr_j.sqrt() / (tr_j.sqrt() + tr_p.sqrt());
-    *p /= 1.0 - beta;
-    for i in from..N {
-        p[(i, i)] += p0[(i, i)].max(0.0) / beta;
-    }
+    let d = SVector::<f64, N>::from_fn(|i, _| if i >= from { p0[(i, i)].max(0.0) } else { 0.0 });
+    minkowski_add_diagonal(p, &d, from..N);
 }
 
 /// [`add_jump_set`] on the listed coordinates only (one actuator's gain and bias).
@@ -272,22 +256,36 @@ pub fn add_jump_set_on<const N: usize>(
     p0: &SMatrix<f64, N, N>,
     coords: &[usize],
 ) {
-    let tr_j: f64 = coords.iter().map(|&i| p0[(i, i)].max(0.0)).sum();
+    let mut d = SVector::<f64, N>::zeros();
+    for &i in coords {
+        d[i] = p0[(i, i)].max(0.0);
+    }
+    minkowski_add_diagonal(p, &d, coords.iter().copied());
+}
+
+/// `p ← E(p) ⊕ E(diag d)` over `coords` (the trace-optimal outer ellipsoid of the Minkowski sum:
+/// `p/(1-β) + diag(d)/β`); a point set `p` becomes `diag(d)`, and a zero `d` leaves `p` as it is.
+fn minkowski_add_diagonal<const N: usize>(
+    p: &mut SMatrix<f64, N, N>,
+    d: &SVector<f64, N>,
+    coords: impl Iterator<Item = usize> + Clone,
+) {
+    let tr_j: f64 = coords.clone().map(|i| d[i]).sum();
     let tr_p = p.trace().max(0.0);
     if tr_j <= 0.0 {
         return;
     }
     if tr_p <= 0.0 {
         *p = SMatrix::zeros();
-        for &i in coords {
-            p[(i, i)] = p0[(i, i)].max(0.0);
+        for i in coords {
+            p[(i, i)] = d[i];
         }
         return;
     }
     let beta = tr_j.sqrt() / (tr_j.sqrt() + tr_p.sqrt());
     *p /= 1.0 - beta;
-    for &i in coords {
-        p[(i, i)] += p0[(i, i)].max(0.0) / beta;
+    for i in coords {
+        p[(i, i)] += d[i] / beta;
     }
 }
 
@@ -573,11 +571,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
     /// of the process set (the Minkowski sum of `periods` copies, `periods²` Q). The new set is
     /// the trace-optimal ellipsoid about the product of the two.
     pub fn reseat(&mut self, rates: &[f64], half_sq: &[f64], periods: f64) {
-        let periods = if periods.is_finite() {
-            periods.max(0.0)
-        } else {
-            0.0
-        };
+        let periods = super::outage_periods(periods);
         let k = rates.len().min(half_sq.len()).min(N);
         let mut rest = SMatrix::<f64, N, N>::zeros();
         let mut grown = SVector::<f64, N>::zeros();
@@ -585,21 +579,10 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
             for j in k..N {
                 rest[(i, j)] = self.p[(i, j)];
             }
-            grown[i] = periods * periods * self.process_noise[i];
+            grown[i] = (periods * periods * self.process_noise[i]).max(0.0);
         }
-        // Projection ⊕ growth (trace-optimal β), then ⊗ the rates' set (trace-optimal λ).
-        let (tr_p, tr_g) = (rest.trace().max(0.0).sqrt(), grown.sum().max(0.0).sqrt());
-        if tr_g > 0.0 && tr_p > 0.0 {
-            let beta = tr_g / (tr_p + tr_g);
-            rest /= 1.0 - beta;
-            for i in k..N {
-                rest[(i, i)] += grown[i] / beta;
-            }
-        } else {
-            for i in k..N {
-                rest[(i, i)] += grown[i];
-            }
-        }
+        // Projection ⊕ growth, then ⊗ the rates' set (trace-optimal λ).
+        minkowski_add_diagonal(&mut rest, &grown, k..N);
         let tr_r: f64 = half_sq[..k].iter().sum::<f64>().max(0.0).sqrt();
         let tr_rest = rest.trace().max(0.0).sqrt();
         // Kept off 0 and 1: a zero-width part (no measurement noise, a point AHC set) would

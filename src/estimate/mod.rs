@@ -87,3 +87,13 @@ pub(crate) fn check_commands(expected: usize, u: &[f64]) -> Result<(), Estimator
     }
     Ok(())
 }
+
+/// The periods an outage spanned, as a reseat takes them: a NaN or negative count (no real
+/// outage) grows nothing.
+pub(crate) fn outage_periods(periods: f64) -> f64 {
+    if periods.is_finite() {
+        periods.max(0.0)
+    } else {
+        0.0
+    }
+}

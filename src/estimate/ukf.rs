@@ -276,11 +276,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     /// `var` and no correlation with the rest; the rest keep their estimate, its variance grown
     /// by `periods` steps of their random walk.
     pub fn reseat(&mut self, rates: &[f64], var: &[f64], periods: f64) {
-        let periods = if periods.is_finite() {
-            periods.max(0.0)
-        } else {
-            0.0
-        };
+        let periods = super::outage_periods(periods);
         let k = rates.len().min(var.len()).min(N);
         for i in 0..k {
             self.x[i] = rates[i];
