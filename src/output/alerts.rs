@@ -19,7 +19,10 @@ use std::collections::{BTreeMap, VecDeque};
 /// MAV_COMP_ID_ONBOARD_COMPUTER.
 pub const ALERT_COMPID: u8 = 191;
 /// At most one STATUSTEXT per vehicle this often (s); more wait in a short queue. When it is
-/// full the least severe text goes; faults (ERROR, CRITICAL) are dropped only past a hard cap.
+/// full the least severe text goes, but never an actuator's newest (the planner's last word on
+/// it must be its state now: a flapping actuator's `cleared` dropped behind its older fault text
+/// left the planner showing a fault that had cleared); faults (ERROR, CRITICAL) are dropped only
+/// past a hard cap.
 const TEXT_INTERVAL_S: f64 = 1.0;
 const TEXT_QUEUE: usize = 8;
 const TEXT_QUEUE_HARD: usize = 64;
@@ -38,6 +41,14 @@ struct Latest {
     index: u8,
 }
 
+/// A STATUSTEXT waiting for its turn, and the actuator it is about (if any).
+#[derive(Debug, Clone, PartialEq)]
+struct QueuedText {
+    severity: MavSeverity,
+    text: String,
+    actuator: Option<String>,
+}
+
 #[derive(Debug, Default)]
 pub struct Alerts {
     seq: u8,
@@ -47,7 +58,7 @@ pub struct Alerts {
     vehicles: Vec<u8>,
     now: f64,
     next_heartbeat: f64,
-    text_queue: BTreeMap<u8, VecDeque<(MavSeverity, String)>>,
+    text_queue: BTreeMap<u8, VecDeque<QueuedText>>,
     last_text: BTreeMap<u8, f64>,
     latest: BTreeMap<(u8, String), Latest>,
     state: BTreeMap<(u8, String), AhcState>,
@@ -153,20 +164,36 @@ impl Alerts {
         if let (Some(a), Some(s)) = (&d.actuator, state_of(d)) {
             self.state.insert((d.sysid, a.clone()), s);
         }
-        if let Some(item) = statustext(d) {
+        if let Some((severity, text)) = statustext(d) {
             let q = self.text_queue.entry(d.sysid).or_default();
-            q.push_back(item);
+            q.push_back(QueuedText {
+                severity,
+                text,
+                actuator: d.actuator.clone(),
+            });
             if q.len() > TEXT_QUEUE {
-                // MAV_SEVERITY: lower is more severe. The least severe goes (the oldest of
-                // those), unless all are faults and the hard cap is not reached.
+                // A text a newer one about the same actuator follows can go; an actuator's
+                // newest stays. MAV_SEVERITY: lower is more severe. The least severe of those
+                // that can go goes (the oldest of those), unless it is a fault and the hard cap
+                // is not reached; past the cap the oldest goes.
+                let superseded = |i: usize| {
+                    q[i].actuator.is_none()
+                        || q.range(i + 1..)
+                            .any(|later| later.actuator == q[i].actuator)
+                };
                 let least = (0..q.len())
                     .rev()
-                    .max_by_key(|&i| q[i].0 as u8)
-                    .unwrap_or(0);
-                let is_fault = (q[least].0 as u8) <= MavSeverity::MAV_SEVERITY_ERROR as u8;
-                if !is_fault || q.len() > TEXT_QUEUE_HARD {
-                    let drop_at = if is_fault { 0 } else { least };
-                    q.remove(drop_at);
+                    .filter(|&i| superseded(i))
+                    .max_by_key(|&i| q[i].severity as u8);
+                let is_fault =
+                    |i: usize| (q[i].severity as u8) <= MavSeverity::MAV_SEVERITY_ERROR as u8;
+                let drop_at = match least {
+                    Some(i) if !is_fault(i) => Some(i),
+                    _ if q.len() > TEXT_QUEUE_HARD => Some(0),
+                    _ => None,
+                };
+                if let Some(i) = drop_at {
+                    q.remove(i);
                     self.texts_dropped += 1;
                 }
             }
@@ -207,7 +234,7 @@ impl Alerts {
             if self.now - last < TEXT_INTERVAL_S {
                 continue;
             }
-            let Some((severity, text)) =
+            let Some(QueuedText { severity, text, .. }) =
                 self.text_queue.get_mut(&sysid).and_then(|q| q.pop_front())
             else {
                 continue;
@@ -354,7 +381,7 @@ mod tests {
         let q = &a.text_queue[&1];
         assert_eq!(q.len(), TEXT_QUEUE);
         assert!(
-            q.iter().any(|(_, t)| t.starts_with("AHC motor2 LOE")),
+            q.iter().any(|x| x.text.starts_with("AHC motor2 LOE")),
             "{q:?}"
         );
         // Faults alone grow the queue past the soft cap rather than being dropped.
@@ -364,9 +391,61 @@ mod tests {
         let q = &a.text_queue[&1];
         assert!(
             q.iter()
-                .filter(|(s, _)| *s == MavSeverity::MAV_SEVERITY_CRITICAL)
+                .filter(|x| x.severity == MavSeverity::MAV_SEVERITY_CRITICAL)
                 .count()
                 == 21
+        );
+    }
+
+    #[test]
+    fn a_flapping_actuator_s_last_queued_text_is_its_state_now() {
+        let mut a = Alerts::default();
+        a.tick(0.0);
+        let decision = |event, actuator: &str, class| {
+            let mut d = Decision::monitor(1.0, 1, event, "");
+            d.actuator = Some(actuator.into());
+            d.class = class;
+            d.gamma = Some(0.5);
+            d.filters = vec!["mit-ukf"];
+            d
+        };
+        // Faster than texts go: motor1 faults and clears ten times, motor2 faults once.
+        a.on_decision(&decision(Event::Fault, "motor2", Some(FaultClass::Stuck)));
+        for _ in 0..10 {
+            a.on_decision(&decision(
+                Event::Fault,
+                "motor1",
+                Some(FaultClass::LossOfEffectiveness),
+            ));
+            a.on_decision(&decision(Event::Cleared, "motor1", None));
+        }
+        let q = &a.text_queue[&1];
+        let last_motor1 = q
+            .iter()
+            .rev()
+            .find(|x| x.actuator.as_deref() == Some("motor1"))
+            .unwrap();
+        assert!(last_motor1.text.contains("cleared"), "{q:?}");
+        assert!(q.len() <= TEXT_QUEUE_HARD);
+        // Sent in order, the planner's last text about motor1 says it cleared.
+        let mut last = None;
+        for k in 1..=40 {
+            a.tick(k as f64 * TEXT_INTERVAL_S);
+        }
+        assert!(a.text_queue[&1].is_empty());
+        for frame in a.outbox.drain(..) {
+            if let crate::link::frame::Parsed::Frame(f, _) = crate::link::frame::parse(&frame)
+                && let MavMessage::STATUSTEXT(t) = f.msg
+            {
+                let text = String::from_utf8_lossy(&t.text[..]).into_owned();
+                if text.contains("motor1") {
+                    last = Some(text);
+                }
+            }
+        }
+        assert!(
+            last.as_deref().is_some_and(|t| t.contains("cleared")),
+            "{last:?}"
         );
     }
 
