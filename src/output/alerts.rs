@@ -350,18 +350,20 @@ mod tests {
         assert_eq!(short_name("g", "motor1"), "g_motor1");
     }
 
+    /// A decision about `actuator` of vehicle 1, as the diagnosis makes them.
+    fn decision(event: Event, actuator: &str, class: Option<FaultClass>) -> Decision {
+        let mut d = Decision::monitor(1.0, 1, event, "");
+        d.actuator = Some(actuator.into());
+        d.class = class;
+        d.gamma = Some(0.5);
+        d.filters = vec!["mit-ukf"];
+        d
+    }
+
     #[test]
     fn a_full_text_queue_drops_the_least_severe_never_a_fault() {
         let mut a = Alerts::default();
         a.tick(0.0);
-        let decision = |event, actuator: &str, class| {
-            let mut d = Decision::monitor(1.0, 1, event, "");
-            d.actuator = Some(actuator.into());
-            d.class = class;
-            d.gamma = Some(0.5);
-            d.filters = vec!["mit-ukf"];
-            d
-        };
         // One text goes at once; then a fault and a flood of notices and resets.
         a.on_decision(&decision(Event::Cleared, "motor1", None));
         a.on_decision(&decision(
@@ -401,14 +403,6 @@ mod tests {
     fn a_flapping_actuator_s_last_queued_text_is_its_state_now() {
         let mut a = Alerts::default();
         a.tick(0.0);
-        let decision = |event, actuator: &str, class| {
-            let mut d = Decision::monitor(1.0, 1, event, "");
-            d.actuator = Some(actuator.into());
-            d.class = class;
-            d.gamma = Some(0.5);
-            d.filters = vec!["mit-ukf"];
-            d
-        };
         // Faster than texts go: motor1 faults and clears ten times, motor2 faults once.
         a.on_decision(&decision(Event::Fault, "motor2", Some(FaultClass::Stuck)));
         for _ in 0..10 {
