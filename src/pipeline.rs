@@ -98,9 +98,6 @@ struct Running {
     since_gap: usize,
     /// The last two measured rates (identified models take their increment).
     rates_prev: [[f64; 3]; 2],
-    /// After a hole the filters coasted over: the mean rate increment over it, which stands
-    /// in for the unknown increment of the period ending at the next sample too.
-    increment_after_hole: Option<[f64; 3]>,
     exogenous: bool,
     last_t: f64,
     est: [[AhcEstimate; MAX_ACTUATORS]; 2],
@@ -637,6 +634,9 @@ impl VehiclePipeline {
                 // The same limit as the calibration's: a lost sample is a gap.
                 let span = s.t - r.last_t;
                 let gap = span > 1.5 * r.dt;
+                // After a hole the filters coast over: the mean rate increment over it, which
+                // stands in for the unknown increment of the period ending at the next sample.
+                let mut increment_after_hole = None;
                 if gap {
                     self.counters.gaps += 1;
                     r.diag.samples_lost(span);
@@ -666,7 +666,7 @@ impl VehiclePipeline {
                                 r.rates_prev = after_first;
                             }
                         }
-                        r.increment_after_hole = Some(mean);
+                        increment_after_hole = Some(mean);
                     } else {
                         // A long outage: the outputs over it are unknown, so the rates are
                         // re-measured rather than predicted (stepped across as one period, the
@@ -685,7 +685,7 @@ impl VehiclePipeline {
                 let input = r.push_command(prev_u);
                 let n_in = r.n_in();
                 let rates_before = r.rates_prev[1];
-                r.rates_prev = match r.increment_after_hole.take() {
+                r.rates_prev = match increment_after_hole {
                     // The next increment is the hole's mean too (see above).
                     Some(mean) => [std::array::from_fn(|i| s.rates[i] - mean[i]), s.rates],
                     None => [r.rates_prev[1], s.rates],
@@ -1034,7 +1034,6 @@ impl VehiclePipeline {
             since_gap: older.len(),
             delay,
             rates_prev,
-            increment_after_hole: None,
             exogenous,
             last_t: last.map_or(0.0, |l| l.0),
             reset_reported: [(f64::NEG_INFINITY, 0); 2],
@@ -1321,6 +1320,10 @@ mod tests {
         let inc =
             |a: usize, b: usize| -> [f64; 3] { std::array::from_fn(|i| rates[a][i] - rates[b][i]) };
         let mean: [f64; 3] = std::array::from_fn(|i| (rates[7][i] - rates[4][i]) / 3.0);
+        // The hole's mean differs from the increments measured around it (gyro noise).
+        assert!((0..3).all(
+            |i| (mean[i] - inc(4, 3)[i]).abs() > 1e-6 && (mean[i] - inc(9, 8)[i]).abs() > 1e-6
+        ));
         // Sample 0 starts over after the jump in time (a reseat, no input); then steps at 1..=4,
         // coasts for 5 and 6, steps at 7..=11.
         let kinds: Vec<bool> = got.iter().map(|(c, _)| *c).collect();

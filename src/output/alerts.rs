@@ -175,7 +175,7 @@ impl Alerts {
                 // A text a newer one about the same actuator follows can go; an actuator's
                 // newest stays. MAV_SEVERITY: lower is more severe. The least severe of those
                 // that can go goes (the oldest of those), unless it is a fault and the hard cap
-                // is not reached; past the cap the oldest goes.
+                // is not reached; past the cap the oldest of those that can go.
                 let superseded = |i: usize| {
                     q[i].actuator.is_none()
                         || q.range(i + 1..)
@@ -189,7 +189,9 @@ impl Alerts {
                     |i: usize| (q[i].severity as u8) <= MavSeverity::MAV_SEVERITY_ERROR as u8;
                 let drop_at = match least {
                     Some(i) if !is_fault(i) => Some(i),
-                    _ if q.len() > TEXT_QUEUE_HARD => Some(0),
+                    _ if q.len() > TEXT_QUEUE_HARD => {
+                        Some((0..q.len()).find(|&i| superseded(i)).unwrap_or(0))
+                    }
                     _ => None,
                 };
                 if let Some(i) = drop_at {
@@ -403,7 +405,9 @@ mod tests {
     fn a_flapping_actuator_s_last_queued_text_is_its_state_now() {
         let mut a = Alerts::default();
         a.tick(0.0);
-        // Faster than texts go: motor1 faults and clears ten times, motor2 faults once.
+        // Faster than texts go (the first goes at once): motor2 faults, then motor1 faults and
+        // clears ten times.
+        a.on_decision(&decision(Event::Cleared, "motor3", None));
         a.on_decision(&decision(Event::Fault, "motor2", Some(FaultClass::Stuck)));
         for _ in 0..10 {
             a.on_decision(&decision(
@@ -420,7 +424,10 @@ mod tests {
             .find(|x| x.actuator.as_deref() == Some("motor1"))
             .unwrap();
         assert!(last_motor1.text.contains("cleared"), "{q:?}");
-        assert!(q.len() <= TEXT_QUEUE_HARD);
+        assert!(
+            q.iter().any(|x| x.text.starts_with("AHC motor2 stuck")),
+            "{q:?}"
+        );
         // Sent in order, the planner's last text about motor1 says it cleared.
         let mut last = None;
         for k in 1..=40 {
@@ -441,6 +448,25 @@ mod tests {
             last.as_deref().is_some_and(|t| t.contains("cleared")),
             "{last:?}"
         );
+    }
+
+    #[test]
+    fn past_the_hard_cap_an_actuator_s_newest_text_still_stays() {
+        let mut a = Alerts::default();
+        a.tick(0.0);
+        a.on_decision(&decision(Event::Cleared, "motor3", None));
+        // motor2's clearing waits behind a flood of motor1 faults past the hard cap.
+        a.on_decision(&decision(Event::Cleared, "motor2", None));
+        for _ in 0..2 * TEXT_QUEUE_HARD {
+            a.on_decision(&decision(Event::Fault, "motor1", Some(FaultClass::Stuck)));
+        }
+        let q = &a.text_queue[&1];
+        assert!(q.len() <= TEXT_QUEUE_HARD + 1, "{}", q.len());
+        assert!(
+            q.iter().any(|x| x.actuator.as_deref() == Some("motor2")),
+            "{q:?}"
+        );
+        assert_eq!(a.texts_dropped, (2 * TEXT_QUEUE_HARD + 1 - q.len()) as u64);
     }
 
     #[test]
