@@ -310,6 +310,32 @@ fn a_stuck_high_hexa_motor_is_at_least_named() {
     }
 }
 
+/// Once decided stuck, hexa motor 5 stays stuck while the data fit a stuck output best: the
+/// filters' gain and bias, which have no "stuck", wander into a loss (seeds 1 and 3 read
+/// stuck, loss, stuck 15-18 s after the onset before the rule).
+#[test]
+fn a_stuck_motor_stays_stuck_while_the_data_fit_stuck() {
+    use ahcmon::diagnose::vehicle::{Event, FaultClass};
+    for seed in [1, 3] {
+        let all = decisions("hexa-x-motor5-stuck", seed);
+        let classes: Vec<(f64, FaultClass)> = all
+            .iter()
+            .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
+            .filter(|d| d.actuator.as_deref() == Some("motor5"))
+            .filter_map(|d| d.class.map(|c| (d.t, c)))
+            .collect();
+        let first_stuck = classes
+            .iter()
+            .position(|&(_, c)| c == FaultClass::Stuck)
+            .unwrap_or_else(|| panic!("seed {seed}: never stuck: {classes:?}"));
+        assert!(
+            classes[first_stuck..]
+                .iter()
+                .all(|&(_, c)| c == FaultClass::Stuck),
+            "seed {seed}: {classes:?}"
+        );
+    }
+}
 /// Hexa motor 3 LOE, seed 4: 13 s after the onset the filters spread the loss onto motor 1.
 /// While the data pin the decided loss on motor 3, motor 1's alarm is listed with it (`also`,
 /// in a `changed` decision), not decided as a fault of its own.

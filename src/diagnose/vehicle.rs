@@ -1125,7 +1125,15 @@ impl Diagnoser {
                     // the two trade (the demo's tail bias read bias, loss, bias within 4 s). It
                     // gives a class at once to a fault that had none.
                     let ukf_warming = t < self.actuators[j].channels[0].hold_until;
-                    let mut c = if c == FaultClass::Unclassified || ukf_warming {
+                    // A stuck output stays stuck while the data still fit it best, clearly or
+                    // not: the filters' gain and bias have no "stuck" and read it as a loss or
+                    // a bias as they wander (hexa motor 5 stuck at 0.55: stuck, loss, stuck
+                    // within 7 s while the data fitted stuck throughout).
+                    let still_stuck = prev == FaultClass::Stuck
+                        && self
+                            .reading
+                            .is_some_and(|r| r.actuator == j && r.kind == ChangeKind::Stuck);
+                    let mut c = if c == FaultClass::Unclassified || ukf_warming || still_stuck {
                         prev
                     } else {
                         c
