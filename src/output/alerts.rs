@@ -63,8 +63,15 @@ pub struct Alerts {
     latest: BTreeMap<(u8, String), Latest>,
     state: BTreeMap<(u8, String), AhcState>,
     last_values: f64,
+    /// The last text accepted about each actuator (queued or sent; an actuator's newest is
+    /// never dropped, so it reaches the planner).
+    last_said: BTreeMap<(u8, String), (u8, String)>,
     /// STATUSTEXT dropped because the queue was full.
     pub texts_dropped: u64,
+    /// STATUSTEXT not queued because the planner's last word on that actuator already reads
+    /// the same (a `changed` decision whose class, size and filters did not change: another
+    /// actuator's alarm taken over by it, say).
+    pub texts_repeated: u64,
     /// STATUSTEXT put in the outbox.
     pub texts_sent: u64,
     /// Frames of the outbox the link could not deliver (counted by the sender).
@@ -165,6 +172,14 @@ impl Alerts {
             self.state.insert((d.sysid, a.clone()), s);
         }
         if let Some((severity, text)) = statustext(d) {
+            if let Some(a) = &d.actuator {
+                let said = (severity as u8, text.clone());
+                if self.last_said.get(&(d.sysid, a.clone())) == Some(&said) {
+                    self.texts_repeated += 1;
+                    return;
+                }
+                self.last_said.insert((d.sysid, a.clone()), said);
+            }
             let q = self.text_queue.entry(d.sysid).or_default();
             q.push_back(QueuedText {
                 severity,
@@ -362,6 +377,36 @@ mod tests {
         d
     }
 
+    /// A loss of effectiveness whose size alternates (50 %, 60 %) with `k`: each text unlike
+    /// the one before.
+    fn changing_loss(actuator: &str, k: usize) -> Decision {
+        let mut d = decision(
+            Event::Fault,
+            actuator,
+            Some(FaultClass::LossOfEffectiveness),
+        );
+        d.gamma = Some(if k % 2 == 0 { 0.5 } else { 0.4 });
+        d
+    }
+
+    /// The STATUSTEXT in the outbox, in order.
+    fn sent_texts(a: &Alerts) -> Vec<String> {
+        a.outbox
+            .iter()
+            .filter_map(|frame| match crate::link::frame::parse(frame) {
+                crate::link::frame::Parsed::Frame(f, _) => match f.msg {
+                    MavMessage::STATUSTEXT(t) => Some(
+                        String::from_utf8_lossy(&t.text[..])
+                            .trim_end_matches('\0')
+                            .to_string(),
+                    ),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect()
+    }
+
     #[test]
     fn a_full_text_queue_drops_the_least_severe_never_a_fault() {
         let mut a = Alerts::default();
@@ -388,9 +433,10 @@ mod tests {
             q.iter().any(|x| x.text.starts_with("AHC motor2 LOE")),
             "{q:?}"
         );
-        // Faults alone grow the queue past the soft cap rather than being dropped.
-        for _ in 0..20 {
-            a.on_decision(&decision(Event::Fault, "motor4", Some(FaultClass::Stuck)));
+        // Faults alone grow the queue past the soft cap rather than being dropped (each text
+        // unlike the one before, or it would not be queued at all).
+        for k in 0..20 {
+            a.on_decision(&changing_loss("motor4", k));
         }
         let q = &a.text_queue[&1];
         assert!(
@@ -457,8 +503,8 @@ mod tests {
         a.on_decision(&decision(Event::Cleared, "motor3", None));
         // motor2's clearing waits behind a flood of motor1 faults past the hard cap.
         a.on_decision(&decision(Event::Cleared, "motor2", None));
-        for _ in 0..2 * TEXT_QUEUE_HARD {
-            a.on_decision(&decision(Event::Fault, "motor1", Some(FaultClass::Stuck)));
+        for k in 0..2 * TEXT_QUEUE_HARD {
+            a.on_decision(&changing_loss("motor1", k));
         }
         let q = &a.text_queue[&1];
         assert!(q.len() <= TEXT_QUEUE_HARD + 1, "{}", q.len());
@@ -505,9 +551,9 @@ mod tests {
         a.tick(0.0);
         let hb = a.outbox.len();
         assert_eq!(hb, 1, "one heartbeat");
-        let mut d = Decision::monitor(1.0, 1, Event::Cleared, "");
-        d.actuator = Some("motor1".into());
-        for _ in 0..3 {
+        for motor in ["motor1", "motor2", "motor3"] {
+            let mut d = Decision::monitor(1.0, 1, Event::Cleared, "");
+            d.actuator = Some(motor.into());
             a.on_decision(&d);
         }
         assert_eq!(a.texts_sent, 1);
@@ -515,5 +561,39 @@ mod tests {
         assert_eq!(a.texts_sent, 1);
         a.tick(1.1);
         assert_eq!(a.texts_sent, 2);
+    }
+
+    #[test]
+    fn a_text_the_planner_already_has_for_the_actuator_is_not_repeated() {
+        // hexa motor 5 stuck: `changed` decisions that only take over other motors' alarms
+        // read "stuck UKF+ESMF" again and again (29 of 209 texts over the eight fault
+        // scenarios, seeds 1-10). The planner hears it once; a different text about the same
+        // actuator, or the same text after a different one, is said.
+        let mut a = Alerts::default();
+        let stuck = decision(Event::Fault, "motor5", Some(FaultClass::Stuck));
+        let mut again = stuck.clone();
+        again.event = Event::Changed;
+        for (k, d) in [&stuck, &again, &again].into_iter().enumerate() {
+            a.tick(k as f64 * 2.0);
+            a.on_decision(d);
+        }
+        assert_eq!((a.texts_sent, a.texts_repeated), (1, 2));
+        let cleared = decision(Event::Cleared, "motor5", None);
+        let other = decision(Event::Fault, "motor6", Some(FaultClass::Stuck));
+        for (k, d) in [&cleared, &stuck, &other].into_iter().enumerate() {
+            a.tick(10.0 + k as f64 * 2.0);
+            a.on_decision(d);
+        }
+        assert_eq!((a.texts_sent, a.texts_repeated), (4, 2));
+        let texts: Vec<String> = sent_texts(&a);
+        assert_eq!(
+            texts,
+            [
+                "AHC motor5 stuck UKF",
+                "AHC motor5 cleared",
+                "AHC motor5 stuck UKF",
+                "AHC motor6 stuck UKF"
+            ]
+        );
     }
 }
