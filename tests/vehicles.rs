@@ -63,6 +63,26 @@ fn faults_are_isolated_by_both_filters_and_classified() {
     }
 }
 
+/// The quad's motor 4 offset is isolated by both filters within 2 s (its class is the open
+/// line: README). Seed 7's MIT-ESMF took 2.26 s while the data's clear reading of motor 4
+/// counted only with a clear kind, which a hovering motor's gain and offset rarely have.
+#[test]
+fn a_motor_offset_is_isolated_by_both_filters() {
+    for seed in [5, 7] {
+        let r = run("quad-x-motor4-bias", seed);
+        for f in &r.filters {
+            let m = &f.metrics;
+            assert_eq!(m.isolated_correct, Some(true), "seed {seed} {}", f.filter);
+            assert!(
+                m.detection_delay_s.is_some_and(|d| d <= 2.0),
+                "seed {seed} {}: {:?}",
+                f.filter,
+                m.detection_delay_s
+            );
+        }
+    }
+}
+
 /// Ten minutes of healthy flight with gusts, manoeuvres and 10 % model mismatch: no fault
 /// decision by either filter on any vehicle (3 seeds here, 10 in the README's eval run).
 #[test]
