@@ -333,6 +333,37 @@ fn a_stuck_high_hexa_motor_is_at_least_named() {
     }
 }
 
+/// Seed 9: motor 6's loss is decided 2.6 s after motor 5 sticks high, naming motor 5 giving
+/// more as the alternative it could not rule out. Once the data pin the stuck output on
+/// motor 5, motor 6 clears (it stayed in force for 16 s beside motor 5's fault), by the time
+/// motor 5's fault is decided.
+#[test]
+fn a_loss_the_data_explain_by_its_named_alternative_clears() {
+    use ahcmon::diagnose::vehicle::Event;
+    let all = decisions("hexa-x-motor5-stuck", 9);
+    let of = |a: &str, e: Event| {
+        all.iter()
+            .find(|d| d.actuator.as_deref() == Some(a) && d.event == e)
+    };
+    let m6 = of("motor6", Event::Fault).expect("motor 6's loss (the case this tests)");
+    assert!(
+        m6.detail
+            .as_deref()
+            .is_some_and(|d| d.contains("or motor5 giving more")),
+        "{m6:?}"
+    );
+    let m5 = of("motor5", Event::Fault).expect("motor 5 decided");
+    let cleared = of("motor6", Event::Cleared).expect("motor 6 cleared");
+    assert!(cleared.t <= m5.t, "{cleared:?} {m5:?}");
+    assert!(
+        cleared
+            .detail
+            .as_deref()
+            .is_some_and(|d| d.contains("motor5")),
+        "{cleared:?}"
+    );
+}
+
 /// Once decided stuck, hexa motor 5 stays stuck while the data fit a stuck output best: the
 /// filters' gain and bias, which have no "stuck", wander into a loss (seeds 1 and 3 read
 /// stuck, loss, stuck 15-18 s after the onset before the rule).

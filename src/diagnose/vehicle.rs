@@ -273,6 +273,9 @@ struct ActuatorState {
     /// k; see `update`), kept while their alarms last: a newly taken one is reported
     /// (`changed`, in `also`).
     borrowed: u16,
+    /// The motor whose excess the fault's decision named as the explanation it could not
+    /// rule out (see `alternative`).
+    alternative: Option<usize>,
 }
 
 /// Weight of a motor's positive deviation (more thrust than commanded) when choosing who
@@ -1015,6 +1018,34 @@ impl Diagnoser {
             _ => None,
         };
         let holder = self.pinned.or_else(|| self.pinned_decided_gain());
+        // A motor's loss decided with another motor's excess as the explanation it could not
+        // rule out, once the data pin an offset or a stuck output on that motor: the data
+        // have ruled it out. It clears, and its alarms are the pinned motor's (hexa motor 5
+        // stuck high, seed 9: motor 6's loss decided 0.6 s before motor 5, then in force for
+        // 16 s beside it).
+        if let Some(m) = self.pinned {
+            for k in (0..l).filter(|&k| k != m) {
+                let st = &self.actuators[k];
+                if st.active.is_none() || st.alternative != Some(m) {
+                    continue;
+                }
+                let mut d = self.decision(t, k, Event::Cleared, None, 0);
+                d.detail = Some(format!(
+                    "{} giving more than commanded, the alternative its decision named, explains it: the data pin it there",
+                    self.names[m]
+                ));
+                if let Some(note) = self.data_note(m) {
+                    append_detail(&mut d, note);
+                }
+                out.push(d);
+                let st = &mut self.actuators[k];
+                st.active = None;
+                st.active_filters = 0;
+                st.class_candidate = None;
+                st.borrowed = 0;
+                st.alternative = None;
+            }
+        }
         // Motors a fault in force took over stay with it while their alarms last (a reading
         // that dips for a step must not hand them back as faults of their own); once an
         // alarm ends, a later one is taken over afresh (and said) or decided on its own.
@@ -1141,11 +1172,13 @@ impl Diagnoser {
                     }
                     out.push(d);
                     let pinned = holder == Some(j);
+                    let alternative = self.alternative_of(j);
                     let st = &mut self.actuators[j];
                     st.active = Some(c);
                     st.active_filters = filters;
                     st.class_candidate = None;
                     st.borrowed = if pinned { borrowed_now } else { 0 };
+                    st.alternative = alternative;
                 }
                 (Some(prev), c) => {
                     // A class once found stays until the excitation allows another, and a new
@@ -1221,16 +1254,19 @@ impl Diagnoser {
     /// When the last attribution put a loss on motor `j` but another motor's excess explained
     /// nearly as much: the explanation it could not rule out.
     fn alternative(&self, j: usize) -> Option<String> {
-        let m = self
-            .prior_decided
-            .iter()
-            .flatten()
-            .find(|(jj, _)| *jj == j)
-            .map(|&(_, m)| m)?;
+        let m = self.alternative_of(j)?;
         Some(format!(
             "or {} giving more than commanded (stuck high?): it explains the measurements nearly as well, and a loss is the likelier fault",
             self.names[m]
         ))
+    }
+
+    fn alternative_of(&self, j: usize) -> Option<usize> {
+        self.prior_decided
+            .iter()
+            .flatten()
+            .find(|(jj, _)| *jj == j)
+            .map(|&(_, m)| m)
     }
 
     /// A motor or throttle whose command barely moves about its operating point: its gain and
