@@ -1875,14 +1875,10 @@ mod tests {
         assert_eq!(decided.len(), 1, "{decided:?}");
     }
 
-    /// The tail's first `fault` decision and every class after it, for the filters reading
-    /// (gamma, delta) from t = 5 s under a command of `u_mean` ± 0.2.
-    fn tail_classes(gamma: f64, delta: f64, u_mean: f64) -> Vec<Decision> {
-        let p = Profile::resolve("heli-h3-120").unwrap();
-        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
-        let healthy = healthy_estimate(0.02);
-        let mut faulty = [healthy; 4];
-        faulty[3] = AhcEstimate {
+    /// H3-120 estimates: healthy but the tail, which reads (gamma, delta).
+    fn with_tail(gamma: f64, delta: f64) -> [AhcEstimate; 4] {
+        let mut e = [healthy_estimate(0.02); 4];
+        e[3] = AhcEstimate {
             gamma,
             gamma_lo: gamma - 0.05,
             gamma_hi: gamma + 0.05,
@@ -1891,6 +1887,16 @@ mod tests {
             delta_hi: delta + 0.03,
             ..Default::default()
         };
+        e
+    }
+
+    /// The tail's first `fault` decision and every class after it, for the filters reading
+    /// (gamma, delta) from t = 5 s under a command of `u_mean` ± 0.2.
+    fn tail_classes(gamma: f64, delta: f64, u_mean: f64) -> Vec<Decision> {
+        let p = Profile::resolve("heli-h3-120").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
+        let healthy = healthy_estimate(0.02);
+        let faulty = with_tail(gamma, delta);
         let (mut out, mut tail) = (vec![], vec![]);
         for k in 0..750 {
             let t = k as f64 * 0.02;
@@ -1963,19 +1969,6 @@ mod tests {
         let p = Profile::resolve("heli-h3-120").unwrap();
         let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, 0.02);
         let healthy = healthy_estimate(0.02);
-        let with_tail = |gamma: f64, delta: f64| {
-            let mut e = [healthy; 4];
-            e[3] = AhcEstimate {
-                gamma,
-                gamma_lo: gamma - 0.05,
-                gamma_hi: gamma + 0.05,
-                delta,
-                delta_lo: delta - 0.03,
-                delta_hi: delta + 0.03,
-                ..Default::default()
-            };
-            e
-        };
         let (bias, mixed) = (with_tail(1.0, 0.15), with_tail(0.73, 0.13));
         let mut out = vec![];
         let mut classes = vec![];
