@@ -278,6 +278,17 @@ struct ActuatorState {
     alternative: Option<usize>,
 }
 
+impl ActuatorState {
+    /// No fault in force any more.
+    fn clear_fault(&mut self) {
+        self.active = None;
+        self.active_filters = 0;
+        self.class_candidate = None;
+        self.borrowed = 0;
+        self.alternative = None;
+    }
+}
+
 /// Weight of a motor's positive deviation (more thrust than commanded) when choosing who
 /// explains the measurements (see `explain`).
 const MOTOR_EXCESS_PRIOR: f64 = 0.5;
@@ -1038,12 +1049,7 @@ impl Diagnoser {
                     append_detail(&mut d, note);
                 }
                 out.push(d);
-                let st = &mut self.actuators[k];
-                st.active = None;
-                st.active_filters = 0;
-                st.class_candidate = None;
-                st.borrowed = 0;
-                st.alternative = None;
+                self.actuators[k].clear_fault();
             }
         }
         // Motors a fault in force took over stay with it while their alarms last (a reading
@@ -1118,11 +1124,7 @@ impl Diagnoser {
             if cleared {
                 let d = self.decision(t, j, Event::Cleared, None, 0);
                 out.push(d);
-                let st = &mut self.actuators[j];
-                st.active = None;
-                st.active_filters = 0;
-                st.class_candidate = None;
-                st.borrowed = 0;
+                self.actuators[j].clear_fault();
                 continue;
             }
             if filters == 0 {
