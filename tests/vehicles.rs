@@ -390,6 +390,7 @@ fn a_stuck_motor_stays_stuck_while_the_data_fit_stuck() {
         );
     }
 }
+
 /// Hexa motor 3 LOE, seed 4: 13 s after the onset the filters spread the loss onto motor 1.
 /// While the data pin the decided loss on motor 3, motor 1's alarm is listed with it (`also`,
 /// in a `changed` decision), not decided as a fault of its own.

@@ -273,9 +273,9 @@ struct ActuatorState {
     /// k; see `update`), kept while their alarms last: a newly taken one is reported
     /// (`changed`, in `also`).
     borrowed: u16,
-    /// The motor whose excess the fault's decision named as the explanation it could not
-    /// rule out (see `alternative`).
-    alternative: Option<usize>,
+    /// The motor whose excess the loss's decision named as the explanation it could not rule
+    /// out (see `alternative`), and when that decision was made.
+    alternative: Option<(usize, f64)>,
 }
 
 impl ActuatorState {
@@ -956,16 +956,17 @@ impl Diagnoser {
             // a gain of 0.61 clearly 1.1 s after the onset, the pair 52 better, and was decided
             // 2.3 s and 3.2 s after the onset; now 1.9 s. A hovering motor's gain and offset
             // differ only through its command's few per cent of variation, so its kind is
-            // rarely clear: the actuator and the size under the best kind must be. The quad's
+            // rarely clear: the actuator must be, and the size under the best kind beyond the
+            // thresholds (`beyond_thresholds`), after `CLASS_MIN_S` of the stretch. The quad's
             // motor 4 offset, seed 7, waited 2.26 s for the MIT-ESMF; now 1.24 s at most, and
             // healthy quad and hexa flights, seeds 1-30 and 1001-1010, still have none.)
-            let kind_clear = if self.is_motor[j] {
+            let long_enough = if self.is_motor[j] {
                 self.reading
                     .is_some_and(|r| r.samples as f64 * self.dt >= CLASS_MIN_S)
             } else {
                 self.step_class_of(j, false).is_some()
             };
-            kind_clear
+            long_enough
                 && self.naming_reading().is_some_and(|r| {
                     r.samples + before <= self.change.len() && self.beyond_thresholds(&r)
                 })
@@ -1030,14 +1031,27 @@ impl Diagnoser {
         };
         let holder = self.pinned.or_else(|| self.pinned_decided_gain());
         // A motor's loss decided with another motor's excess as the explanation it could not
-        // rule out, once the data pin an offset or a stuck output on that motor: the data
-        // have ruled it out. It clears, and its alarms are the pinned motor's (hexa motor 5
-        // stuck high, seed 9: motor 6's loss decided 0.6 s before motor 5, then in force for
-        // 16 s beside it).
-        if let Some(m) = self.pinned {
+        // rule out, once the data pin on that motor an output above its command (an offset
+        // up, or stuck above the mean command) that began before the loss was decided: the
+        // data have ruled the loss out. It clears, and its alarms are the pinned motor's (hexa
+        // motor 5 stuck high, seed 9: motor 6's loss decided 0.6 s before motor 5, then in
+        // force for 16 s beside it).
+        let excess = self.pinned.and_then(|m| {
+            self.naming_reading()
+                .filter(|r| r.actuator == m)
+                .filter(|r| match r.kind {
+                    ChangeKind::Offset => r.value > 0.0,
+                    ChangeKind::Stuck => r.value > r.command_mean,
+                    ChangeKind::Gain => false,
+                })
+                .map(|r| (m, r.since))
+        });
+        if let Some((m, since)) = excess {
             for k in (0..l).filter(|&k| k != m) {
                 let st = &self.actuators[k];
-                if st.active.is_none() || st.alternative != Some(m) {
+                if st.active.is_none()
+                    || !st.alternative.is_some_and(|(a, at)| a == m && since <= at)
+                {
                     continue;
                 }
                 let mut d = self.decision(t, k, Event::Cleared, None, 0);
@@ -1174,7 +1188,10 @@ impl Diagnoser {
                     }
                     out.push(d);
                     let pinned = holder == Some(j);
-                    let alternative = self.alternative_of(j);
+                    let alternative = self
+                        .alternative_of(j)
+                        .filter(|_| c == FaultClass::LossOfEffectiveness)
+                        .map(|m| (m, t));
                     let st = &mut self.actuators[j];
                     st.active = Some(c);
                     st.active_filters = filters;

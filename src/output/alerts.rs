@@ -63,14 +63,15 @@ pub struct Alerts {
     latest: BTreeMap<(u8, String), Latest>,
     state: BTreeMap<(u8, String), AhcState>,
     last_values: f64,
-    /// The last text accepted about each actuator (queued or sent; an actuator's newest is
-    /// never dropped, so it reaches the planner).
+    /// The last text queued about each actuator (an actuator's newest is never dropped from
+    /// the queue; whether the link delivered it, UDP cannot say).
     last_said: BTreeMap<(u8, String), (u8, String)>,
     /// STATUSTEXT dropped because the queue was full.
     pub texts_dropped: u64,
-    /// STATUSTEXT not queued because the planner's last word on that actuator already reads
-    /// the same (a `changed` decision whose class, size and filters did not change: another
-    /// actuator's alarm taken over by it, say).
+    /// STATUSTEXT of `changed` decisions not queued because the last text queued about that
+    /// actuator reads the same (class, size and filters unchanged: another actuator's alarm
+    /// taken over by it, say). A `fault` or `cleared` is always said (after a reboot the same
+    /// fault is news again).
     pub texts_repeated: u64,
     /// STATUSTEXT put in the outbox.
     pub texts_sent: u64,
@@ -174,7 +175,9 @@ impl Alerts {
         if let Some((severity, text)) = statustext(d) {
             if let Some(a) = &d.actuator {
                 let said = (severity as u8, text.clone());
-                if self.last_said.get(&(d.sysid, a.clone())) == Some(&said) {
+                if d.event == Event::Changed
+                    && self.last_said.get(&(d.sysid, a.clone())) == Some(&said)
+                {
                     self.texts_repeated += 1;
                     return;
                 }
@@ -568,7 +571,7 @@ mod tests {
         // hexa motor 5 stuck: `changed` decisions that only take over other motors' alarms
         // read "stuck UKF+ESMF" again and again (29 of 209 texts over the eight fault
         // scenarios, seeds 1-10). The planner hears it once; a different text about the same
-        // actuator, or the same text after a different one, is said.
+        // actuator, the same text after a different one, or a `fault`, is said.
         let mut a = Alerts::default();
         let stuck = decision(Event::Fault, "motor5", Some(FaultClass::Stuck));
         let mut again = stuck.clone();
@@ -585,6 +588,11 @@ mod tests {
             a.on_decision(d);
         }
         assert_eq!((a.texts_sent, a.texts_repeated), (4, 2));
+        // After a reboot (a fresh diagnosis, no `cleared`) the same fault is decided again:
+        // news, so said.
+        a.tick(20.0);
+        a.on_decision(&other);
+        assert_eq!((a.texts_sent, a.texts_repeated), (5, 2));
         let texts: Vec<String> = sent_texts(&a);
         assert_eq!(
             texts,
@@ -592,6 +600,7 @@ mod tests {
                 "AHC motor5 stuck UKF",
                 "AHC motor5 cleared",
                 "AHC motor5 stuck UKF",
+                "AHC motor6 stuck UKF",
                 "AHC motor6 stuck UKF"
             ]
         );
