@@ -42,7 +42,7 @@ pub fn render(
         let c = &v.counters;
         let _ = writeln!(
             s,
-            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} samples dropped at them), {} non-finite; {} frames missing from the autopilot's sequence numbers (lost on the link, or dropped as corrupt or of an unknown message id)",
+            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} samples dropped at them), {} stamped over a second ahead (clock jumps no second message confirmed), {} non-finite; {} frames missing from the autopilot's sequence numbers (lost on the link, or dropped as corrupt or of an unknown message id)",
             v.info
                 .mav_type
                 .map_or("unknown".to_string(), |t| format!("{t:?}")
@@ -54,6 +54,7 @@ pub fn render(
             c.duplicates,
             c.reboots,
             c.dropped_at_reboot,
+            c.ahead_of_clock,
             c.non_finite,
             c.lost_frames
         );

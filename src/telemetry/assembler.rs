@@ -49,6 +49,11 @@ pub struct TelemetryCounters {
     pub duplicates: u64,
     /// Vehicle clock jumped back by more than a second (confirmed by a second message).
     pub reboots: u64,
+    /// Messages stamped more than a second ahead of the vehicle clock that no second message
+    /// on the same clock had confirmed: dropped. One corrupt stamp (a CRC-valid ATTITUDE with
+    /// a wild `time_boot_ms`) used to move the clock far ahead, and everything after it was
+    /// "reordered"; after a link outage of over a second the first message is one of these.
+    pub ahead_of_clock: u64,
     /// Samples still waiting for their a_z when the vehicle rebooted: dropped, not fed to the
     /// new boot's filters.
     pub dropped_at_reboot: u64,
@@ -129,6 +134,9 @@ pub struct VehicleAssembler {
     /// The first of the messages more than a second behind the clock since the last one on
     /// it: a reboot once they cover `REBOOT_HOLD_S` (stale copies from a second link do not).
     reboot_candidate: Option<f64>,
+    /// The last message stamped more than a second ahead of the clock (its stamp, component
+    /// and the message), held until the next one confirms the jump.
+    held_ahead: Option<(f64, u8, MavMessage)>,
     /// The vehicle sends IMU accelerations: a complete instant waits for its a_z.
     has_imu: bool,
     /// Smoothed interval between rate instants (s), once seen: the pairing tolerance stays
@@ -160,6 +168,11 @@ const AZ_SOURCE_SILENT_S: f64 = 1.0;
 /// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
 /// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
 /// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
+/// Whether `t` can be on the same new clock as `first`, the first message seen on it.
+fn on_new_clock(first: f64, t: f64) -> bool {
+    (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t)
+}
+
 fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
     let raw = f64::from(stamp) * 1e-6;
     match reference_s {
@@ -192,6 +205,7 @@ impl VehicleAssembler {
             clock: None,
             rebooted: false,
             reboot_candidate: None,
+            held_ahead: None,
             has_imu: false,
             rate_period: None,
             pending: None,
@@ -213,6 +227,25 @@ impl VehicleAssembler {
         self.clock.is_some_and(|c| t < c - REBOOT_BACKSTEP_S)
     }
 
+    /// A u32 µs stamp (SERVO_OUTPUT_RAW, older RAW_IMU) on the vehicle clock. Unwrapped next to
+    /// the clock it falls behind it after a reboot late in a wrap period (over 71.6 min of
+    /// uptime: a stamp of 2 s read as 4297 s against a clock at 5000 s), never on the new
+    /// boot's clock of its ATTITUDE, and the reboot was never confirmed: the rest of the log
+    /// was dropped as reordered. So while a reboot is pending, a stamp behind the clock is
+    /// unwrapped next to the new clock too, and taken so if it falls there.
+    fn unwrap_stamp(&self, stamp: u32) -> f64 {
+        let t = unwrap_u32_us(stamp, self.clock);
+        if self.behind(t)
+            && let Some(first) = self.reboot_candidate
+        {
+            let on_new = unwrap_u32_us(stamp, Some(first));
+            if on_new_clock(first, on_new) {
+                return on_new;
+            }
+        }
+        t
+    }
+
     /// Advance the clock; false if `t` is stale (reordered) — the message is then dropped and
     /// counted. The first message of a new boot is dropped too, until the second confirms it.
     fn tick(&mut self, t: f64) -> bool {
@@ -228,7 +261,7 @@ impl VehicleAssembler {
         // The first message on the new clock, if this one is on it too.
         let first = self
             .reboot_candidate
-            .filter(|&first| (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t));
+            .filter(|&first| on_new_clock(first, t));
         if !first.is_some_and(|first| t - first >= REBOOT_HOLD_S) {
             // Not (yet) enough of the new clock: dropped and counted.
             if first.is_none() {
@@ -284,8 +317,60 @@ impl VehicleAssembler {
         self.seq = Some((seq, seen));
     }
 
+    /// The stamp of a message that advances the vehicle clock (the autopilot's rates and
+    /// outputs): a u32 µs stamp unwrapped next to `near`, or next to the clock.
+    fn clock_stamp(&self, compid: u8, msg: &MavMessage, near: Option<f64>) -> Option<f64> {
+        if !self.is_autopilot_component(compid) {
+            return None;
+        }
+        match msg {
+            MavMessage::ATTITUDE(a) => Some(f64::from(a.time_boot_ms) * 1e-3),
+            MavMessage::SERVO_OUTPUT_RAW(s) if s.port == 0 => Some(match near {
+                Some(_) => unwrap_u32_us(s.time_usec, near),
+                None => self.unwrap_stamp(s.time_usec),
+            }),
+            MavMessage::ACTUATOR_OUTPUT_STATUS(s) => Some(s.time_usec as f64 * 1e-6),
+            _ => None,
+        }
+    }
+
     /// Feed one message; complete instants are appended to `out` (in time order).
+    ///
+    /// A message stamped more than a second ahead of the clock (after a link outage, or one
+    /// corrupt stamp) is held until the next: on the same clock, the jump is taken and both
+    /// are used; otherwise it is dropped and counted. One CRC-valid ATTITUDE with a wild
+    /// `time_boot_ms` used to move the clock days ahead, and the rest of the flight read as
+    /// reordered.
     pub fn on_message(&mut self, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
+        let stamp = self.clock_stamp(compid, msg, None);
+        let ahead = stamp.filter(|&t| self.clock.is_some_and(|c| t > c + REBOOT_BACKSTEP_S));
+        // Only the next message on a clock decides (not a heartbeat or an IMU message). A u32
+        // µs stamp (which can never read ahead of the clock it is unwrapped next to) confirms
+        // if it falls next to the held one: a log that starts with SERVO_OUTPUT_RAW after
+        // 71.6 min of uptime has its clock set a wrap period or more behind the ATTITUDE's.
+        if stamp.is_some()
+            && let Some((held_t, held_compid, held)) = self.held_ahead.take()
+        {
+            let confirms = self
+                .clock_stamp(compid, msg, Some(held_t))
+                .is_some_and(|t| (t - held_t).abs() <= REBOOT_BACKSTEP_S);
+            if confirms {
+                self.clock = Some(held_t);
+                self.use_message(held_compid, &held, out);
+                self.use_message(compid, msg, out);
+                return;
+            }
+            self.counters.ahead_of_clock += 1;
+        }
+        if let Some(t) = ahead {
+            self.held_ahead = Some((t, compid, msg.clone()));
+            return;
+        }
+        // (A message off the clock passes while one is held: it cannot confirm or refute it.)
+        self.use_message(compid, msg, out);
+    }
+
+    fn use_message(&mut self, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
         // A new rate instant releases a sample still waiting for its a_z, without it; one from
         // a clock far behind (stale, or a reboot) does not.
         if let MavMessage::ATTITUDE(a) = msg
@@ -315,6 +400,9 @@ impl VehicleAssembler {
     /// A sample still waiting for its a_z, released without it (end of input).
     pub fn flush(&mut self, out: &mut Vec<TelemetrySample>) {
         out.extend(self.pending.take());
+        if self.held_ahead.take().is_some() {
+            self.counters.ahead_of_clock += 1;
+        }
     }
 
     fn message(&mut self, compid: u8, msg: &MavMessage) -> Option<TelemetrySample> {
@@ -412,7 +500,7 @@ impl VehicleAssembler {
                 if s.port != 0 {
                     return None;
                 }
-                let t = unwrap_u32_us(s.time_usec, self.clock);
+                let t = self.unwrap_stamp(s.time_usec);
                 if !self.tick(t) {
                     return None;
                 }
@@ -474,7 +562,7 @@ impl VehicleAssembler {
                 // Older ArduPilot stamps it with the 32-bit micros(), which wraps every 71.6
                 // min; a stamp that fits in 32 bits is unwrapped like SERVO_OUTPUT_RAW's.
                 let t = match u32::try_from(m.time_usec) {
-                    Ok(us) => unwrap_u32_us(us, self.clock),
+                    Ok(us) => self.unwrap_stamp(us),
                     Err(_) => m.time_usec as f64 * 1e-6,
                 };
                 self.on_az(AzSource::RawImu, t, f64::from(m.zacc) * 1e-3 * G0)
@@ -647,7 +735,8 @@ mod tests {
 
     fn outputs(ms: u32, pwm: u16) -> MavMessage {
         MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
-            time_usec: ms * 1000,
+            // The autopilot's 32-bit micros() wraps every 71.6 min.
+            time_usec: ms.wrapping_mul(1000),
             servo1_raw: pwm,
             ..Default::default()
         })
@@ -862,6 +951,91 @@ mod tests {
         // second of it has confirmed the reboot.
         assert!(after.iter().all(|s| s.t < 10.0), "{after:?}");
         assert!(after.len() >= 30, "{}", after.len());
+    }
+
+    #[test]
+    fn a_reboot_after_a_u32_wrap_period_of_uptime_is_seen_and_the_new_flight_kept() {
+        // 5000 s of uptime: SERVO_OUTPUT_RAW's µs stamps have wrapped once, and the new boot's
+        // (2 s) unwrapped next to the old clock read 4297 s. The reboot was never confirmed
+        // and every later message was dropped as reordered.
+        let up = 5_000_000;
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let got = feed(&mut a, &[attitude(up), outputs(up, 1500)]);
+        assert_eq!(
+            got.len(),
+            1,
+            "the old boot's stamps unwrap next to its clock"
+        );
+        let mut after = vec![];
+        for k in 0..100 {
+            let ms = 2_000 + 20 * k;
+            after.extend(feed(&mut a, &[attitude(ms), outputs(ms, 1500)]));
+        }
+        assert_eq!(a.counters.reboots, 1);
+        assert!(after.iter().all(|s| s.t < 10.0), "{after:?}");
+        // Half a second of the new clock confirms the reboot; the rest of it comes out.
+        assert!(after.len() >= 70, "{}", after.len());
+        // The same with the outputs first at each instant.
+        let mut b = VehicleAssembler::new(1, AssemblerConfig::default());
+        feed(&mut b, &[outputs(up, 1500), attitude(up)]);
+        let mut after = vec![];
+        for k in 0..100 {
+            let ms = 2_000 + 20 * k;
+            after.extend(feed(&mut b, &[outputs(ms, 1500), attitude(ms)]));
+        }
+        assert_eq!(b.counters.reboots, 1);
+        assert!(after.len() >= 70, "{}", after.len());
+    }
+
+    #[test]
+    fn one_message_stamped_far_ahead_does_not_move_the_clock() {
+        // A CRC-valid ATTITUDE with a wild time_boot_ms (2^31 ms) in a steady stream: it used
+        // to move the clock 24 days ahead, and the rest of the flight read as reordered.
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut got = vec![];
+        for k in 0..200 {
+            let ms = 60_000 + 20 * k;
+            if k == 50 {
+                got.extend(feed(&mut a, &[attitude(1 << 31)]));
+            }
+            got.extend(feed(&mut a, &[attitude(ms), outputs(ms, 1500)]));
+        }
+        assert_eq!(got.len(), 200);
+        assert!(got.iter().all(|s| s.t < 70.0));
+        assert_eq!(a.counters.ahead_of_clock, 1);
+        assert_eq!((a.counters.out_of_order, a.counters.reboots), (0, 0));
+    }
+
+    #[test]
+    fn a_log_that_starts_with_wrapped_output_stamps_takes_the_attitude_clock() {
+        // 21 h of uptime (as in rust-mavlink-log.tlog): the first message, SERVO_OUTPUT_RAW,
+        // sets the clock from its wrapped µs stamp, 17 wrap periods behind the ATTITUDE's.
+        let up = 76_674_000;
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut got = feed(&mut a, &[outputs(up - 250, 1500)]);
+        for k in 0..50 {
+            let ms = up + 250 * k;
+            got.extend(feed(&mut a, &[attitude(ms), outputs(ms, 1500)]));
+        }
+        assert_eq!(got.len(), 50);
+        assert!(got.iter().all(|s| s.t > 76_000.0), "{:?}", got[0]);
+        assert_eq!((a.counters.ahead_of_clock, a.counters.out_of_order), (0, 0));
+    }
+
+    #[test]
+    fn after_a_link_outage_the_stream_goes_on_from_its_second_message() {
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut got = vec![];
+        for k in (0..50).chain(150..200) {
+            // 2 s with nothing between k = 49 and k = 150; an IMU message between each
+            // instant's rates and outputs (it is on no clock and decides nothing).
+            let ms = 60_000 + 20 * k;
+            got.extend(feed(&mut a, &[attitude(ms), imu(ms), outputs(ms, 1500)]));
+        }
+        // The first message after the outage waits for a second on its clock, then both count.
+        assert_eq!(a.counters.ahead_of_clock, 0);
+        assert_eq!(got.len(), 100);
+        assert_eq!(a.counters.out_of_order, 0);
     }
 
     #[test]
