@@ -919,6 +919,10 @@ impl VehiclePipeline {
         } else {
             None
         };
+        // Rate axes the model fits worse than a constant would: a profile that is not this
+        // vehicle's, or a stretch that was not healthy flight (an offset-only axis, which a
+        // steady hover does not excite, has little to explain and passes down to R² = -1).
+        let mut poor: Vec<String> = Vec::new();
         let (calibrated, fit, summary) = if let Some(arx) = identified {
             let mut calibrated = profile.clone();
             set_noise_from_fit(&mut calibrated, &arx.quality.residual_std, dt);
@@ -935,6 +939,11 @@ impl VehiclePipeline {
                     "offset only"
                 };
                 parts.push(format!("a_z {how} R²={r2:.2}"));
+            }
+            for (i, r2) in arx.quality.r_squared[..3].iter().enumerate() {
+                if *r2 < 0.0 {
+                    poor.push(format!("{} R²={r2:.2}", axes[i]));
+                }
             }
             let summary = format!(
                 "identified model, command delay {} ms: {}",
@@ -955,6 +964,15 @@ impl VehiclePipeline {
             let mut calibrated = profile.with_rate_params(&fit.params);
             set_noise_from_fit(&mut calibrated, &fit.quality.residual_std, dt);
             let axes = ["roll", "pitch", "yaw", "a_z"];
+            for (axis, (r2, scaled)) in axes
+                .iter()
+                .zip(fit.quality.r_squared.iter().zip(&fit.scaled))
+                .take(3)
+            {
+                if *r2 < if *scaled { 0.0 } else { -1.0 } {
+                    poor.push(format!("{axis} R²={r2:.2}"));
+                }
+            }
             let summary: Vec<String> = fit
                 .scaled
                 .iter()
@@ -984,6 +1002,16 @@ impl VehiclePipeline {
                 summary
             ),
         );
+        if !poor.is_empty() {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: the model fits {} worse than a constant: the profile ({}) may not be this vehicle's, or the stretch was not healthy flight; its estimates and decisions are not to be trusted",
+                    poor.join(", "),
+                    calibrated.name
+                ),
+            );
+        }
         // A stretch cut short (by --calibrate-until / --calibrate-s) still fits, but loosely.
         if span < SHORT_CALIBRATION_S {
             sink.message(

@@ -19,6 +19,7 @@ struct Collect {
     ukf: Vec<(f64, Vec<(f64, f64)>)>,
     /// (t, both filters' estimates per actuator).
     all: Vec<(f64, [Vec<AhcEstimate>; 2])>,
+    messages: Vec<String>,
 }
 
 impl PipelineSink for Collect {
@@ -30,7 +31,9 @@ impl PipelineSink for Collect {
             .push((t, est[0].iter().map(|e| (e.gamma, e.delta)).collect()));
         self.all.push((t, [est[0].to_vec(), est[1].to_vec()]));
     }
-    fn message(&mut self, _: u8, _: &str) {}
+    fn message(&mut self, _: u8, text: &str) {
+        self.messages.push(text.to_owned());
+    }
     fn link_event(&mut self, d: &Decision) {
         self.decisions.push(d.clone());
     }
@@ -246,6 +249,20 @@ fn heli_maneuvers_servo3_gain_fault() {
     assert!(c.decisions.iter().any(|d| d.event == Event::Cleared
         && d.t > off
         && d.actuator.as_deref() == Some("swash3")));
+}
+
+#[test]
+fn a_profile_for_another_vehicle_is_warned_about_twice() {
+    let rel = "sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog";
+    let warned = |run: &Collect, what: &str| run.messages.iter().any(|m| m.contains(what));
+    // Chosen from the HEARTBEAT: neither warning.
+    let run = replay(rel, None);
+    assert!(!warned(&run, "mean nothing") && !warned(&run, "worse than a constant"));
+    // A plane's profile on the quadrotor: the HEARTBEAT says so before the flight, and the
+    // calibration's fit after 20 s (roll R² = -46).
+    let run = replay(rel, Some("plane"));
+    assert!(warned(&run, "mean nothing"), "{:?}", run.messages);
+    assert!(warned(&run, "worse than a constant"), "{:?}", run.messages);
 }
 
 #[test]

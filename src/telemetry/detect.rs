@@ -3,7 +3,7 @@
 //! `SERVOn_*` / `MOT_PWM_*` parameters. Anything assumed is said once, with the override.
 
 use super::assembler::VehicleInfo;
-use super::profile::{Profile, ProfileError, Role};
+use super::profile::{Profile, ProfileError, Role, VehicleKind};
 use crate::link::dialects::ahcmon::MavType;
 use thiserror::Error;
 
@@ -185,10 +185,63 @@ fn pre_4_0_heli(info: &VehicleInfo) -> bool {
 /// drives its outputs: a swash servo whose range is not ArduPilot's fixed trim ± 500 µs reads
 /// its offsets and stuck positions scaled.
 pub fn given_profile_warnings(profile: &Profile, info: &VehicleInfo) -> Vec<String> {
+    let mut warnings: Vec<String> = kind_mismatch(profile, info).into_iter().collect();
     let ardupilot_heli = info.param("H_SW_TYPE").is_some() || info.param("H_SWASH_TYPE").is_some();
     if !ardupilot_heli || pre_4_0_heli(info) {
-        return Vec::new();
+        return warnings;
     }
+    warnings.extend(swash_range_warnings(profile, info));
+    warnings
+}
+
+/// A `--profile` for another kind of vehicle (or another number of motors) than the one whose
+/// HEARTBEAT is in the stream: its model fits nothing, and its estimates and decisions mean
+/// nothing (a plane's profile on a quadrotor read every gain as 0 and faulted its surfaces).
+fn kind_mismatch(profile: &Profile, info: &VehicleInfo) -> Option<String> {
+    let mav_type = info.mav_type?;
+    let (kind, motors) = match mav_type {
+        MavType::MAV_TYPE_HELICOPTER => (VehicleKind::Helicopter, None),
+        MavType::MAV_TYPE_QUADROTOR => (VehicleKind::Multirotor, Some(4)),
+        MavType::MAV_TYPE_HEXAROTOR => (VehicleKind::Multirotor, Some(6)),
+        MavType::MAV_TYPE_OCTOROTOR => (VehicleKind::Multirotor, Some(8)),
+        MavType::MAV_TYPE_TRICOPTER => (VehicleKind::Multirotor, Some(3)),
+        MavType::MAV_TYPE_FIXED_WING => (VehicleKind::Plane, None),
+        _ => return None,
+    };
+    let profile_motors = profile
+        .actuators
+        .iter()
+        .filter(|a| a.role == Role::Motor)
+        .count();
+    let what = |k: VehicleKind| match k {
+        VehicleKind::Helicopter => "helicopter",
+        VehicleKind::Multirotor => "multirotor",
+        VehicleKind::Plane => "plane",
+    };
+    let heartbeat = format!("{mav_type:?}")
+        .trim_start_matches("MAV_TYPE_")
+        .to_lowercase();
+    if profile.vehicle != kind {
+        return Some(format!(
+            "sysid {}: the profile {} is for a {}, but the vehicle's HEARTBEAT says {heartbeat}: its model will not fit, and its estimates and decisions mean nothing (leave --profile out to choose by the HEARTBEAT)",
+            info.sysid,
+            profile.name,
+            what(profile.vehicle)
+        ));
+    }
+    match motors {
+        Some(n) if profile_motors != n => Some(format!(
+            "sysid {}: the profile {} has {profile_motors} motors, but the vehicle's HEARTBEAT says {heartbeat} ({n}): its model will not fit, and its estimates and decisions mean nothing",
+            info.sysid, profile.name
+        )),
+        _ => None,
+    }
+}
+
+fn swash_range_warnings<'a>(
+    profile: &'a Profile,
+    info: &'a VehicleInfo,
+) -> impl Iterator<Item = String> + 'a {
     profile
         .actuators
         .iter()
@@ -203,7 +256,6 @@ pub fn given_profile_warnings(profile: &Profile, info: &VehicleInfo) -> Vec<Stri
                 info.sysid, a.name, a.pwm_min, a.pwm_max, a.pwm_trim
             )
         })
-        .collect()
 }
 
 /// Map the profile's actuators to outputs and PWM ranges from ArduPilot's `SERVOn_FUNCTION`,
@@ -302,6 +354,29 @@ mod tests {
             params: params.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_given_profile_for_another_kind_of_vehicle_is_warned_about() {
+        let quad = info(MavType::MAV_TYPE_QUADROTOR, &[]);
+        let warned = |name: &str, on: &VehicleInfo| {
+            given_profile_warnings(&Profile::resolve(name).unwrap(), on)
+                .iter()
+                .any(|w| w.contains("mean nothing"))
+        };
+        assert!(warned("plane", &quad));
+        assert!(warned("paper-heli", &quad));
+        assert!(warned("hexa-x", &quad), "six motors for four");
+        assert!(!warned("quad-x", &quad));
+        assert!(!warned("quad-plus", &quad));
+        assert!(!warned("hexa-x", &info(MavType::MAV_TYPE_HEXAROTOR, &[])));
+        assert!(!warned(
+            "heli-h3-120",
+            &info(MavType::MAV_TYPE_HELICOPTER, &[])
+        ));
+        assert!(warned("quad-x", &info(MavType::MAV_TYPE_FIXED_WING, &[])));
+        // A vehicle type we have no profiles for says nothing either way.
+        assert!(!warned("quad-x", &info(MavType::MAV_TYPE_SUBMARINE, &[])));
     }
 
     #[test]
