@@ -1146,6 +1146,17 @@ fn replay(
         ))
         .into());
     }
+    // An estimation that failed (said when it happened and in the summary) is no success: a
+    // script must not take the log as checked. (A log with no flight in it is: the summary
+    // says why nothing was estimated.)
+    let failed: Vec<String> = monitor
+        .pipelines
+        .iter()
+        .filter_map(|(sysid, p)| p.failed().map(|why| format!("sysid {sysid}: {why}")))
+        .collect();
+    if !failed.is_empty() {
+        anyhow::bail!("the estimation failed ({})", failed.join("; "));
+    }
     Ok(())
 }
 

@@ -380,6 +380,14 @@ impl VehiclePipeline {
         self.stage = Stage::Failed;
     }
 
+    /// Why the run failed, once it has (the estimation stopped for good).
+    pub fn failed(&self) -> Option<&str> {
+        match self.stage {
+            Stage::Failed => Some(self.failure.as_deref().unwrap_or("failed")),
+            _ => None,
+        }
+    }
+
     pub fn stage_name(&self) -> &'static str {
         match self.stage {
             Stage::Grounded => "waiting for flight",

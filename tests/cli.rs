@@ -592,12 +592,19 @@ fn a_calibration_end_outside_the_flight_is_explained() {
     let l = log.to_str().unwrap();
     // Before take-off (about t = 71 s in this log).
     let (code, out, err) = ahcmon(&["replay", l, "--headless", "--calibrate-until", "30"]);
-    assert_eq!(code, 0, "{err}");
     assert!(
         out.contains(
             "no estimates: the calibration stretch was chosen to end at t=30 s, before it can start"
         ),
         "{out}"
+    );
+    // A failed estimation is no success for a script (it was exit 0).
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.lines()
+            .last()
+            .is_some_and(|l| l.contains("the estimation failed (sysid 1: ")),
+        "{err}"
     );
     // After the end of the log (t = 153 s).
     let (_, out, _) = ahcmon(&["replay", l, "--headless", "--calibrate-until", "1000"]);
