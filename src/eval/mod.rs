@@ -287,7 +287,7 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
 }
 
 /// One row of the eval table: one scenario × filter, aggregated over seeds.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct Row {
     pub scenario: String,
     pub vehicle: String,
