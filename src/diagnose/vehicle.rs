@@ -1219,11 +1219,27 @@ impl Diagnoser {
                             .reading
                             .is_some_and(|r| r.actuator == j && r.kind == ChangeKind::Stuck)
                         && self.data_class(j).is_none_or(|c| c == FaultClass::Stuck);
-                    let mut c = if c == FaultClass::Unclassified || ukf_warming || still_stuck {
-                        prev
-                    } else {
-                        c
-                    };
+                    // Back within the tolerances at the operating point (gain near 1, the
+                    // effective output near the command) with no new step in the data's stored
+                    // stretch: the fault is ending, and the clearing follows once the alarms
+                    // have decayed. A class read meanwhile is the recovery's: the SITL quad X's
+                    // motor 4 read stuck at 0.60 for the 1.3 s between its fault's end and the
+                    // clearing (its unwinding integrators held the output level), the quad +
+                    // and TradHeli logs read bias. (A stuck output near its command is within
+                    // the tolerances too, but the data show its step: hexa motor 5.)
+                    let e = self.actuators[j].channels[0].last;
+                    let new_step = self
+                        .reading
+                        .is_some_and(|r| r.actuator == j && r.samples < self.change.len());
+                    let back = (e.gamma - 1.0).abs() < p.loe_tau
+                        && self.actuators[j].channels[0].e.abs() < p.threshold
+                        && !new_step;
+                    let mut c =
+                        if c == FaultClass::Unclassified || ukf_warming || still_stuck || back {
+                            prev
+                        } else {
+                            c
+                        };
                     if c != prev {
                         let st = &mut self.actuators[j];
                         let since = match st.class_candidate {
