@@ -534,6 +534,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "demo: on the autopilot's clock, which the monitor shows: {}",
                 ahcmon::link::simulate::script_on_vehicle_clock(&named.scenario)
             );
+            warn_fault_in_calibration("demo", &named);
             let args = RunArgs {
                 profile: None,
                 decisions,
@@ -622,6 +623,22 @@ const SPEED_RANGE: (f64, f64) = (1e-3, 1e6);
 const TIMEOUT_RANGE_S: (f64, f64) = (1e-3, 1e6);
 
 /// The simulated vehicle as a MAVLink autopilot: to a live connection and/or a tlog.
+/// A monitor with default settings takes the first settle + calibration seconds of the
+/// flight as healthy: a scenario's fault in them becomes the vehicle's normal. Said by `sim`
+/// and `demo` (`demo --scenario quad-x-motor2-loe` decided only a wrong motor, silently).
+fn warn_fault_in_calibration(who: &str, named: &NamedScenario) {
+    let defaults = PipelineConfig::default();
+    let learned_until = defaults.settle_s + defaults.calibrate_s;
+    if let Some(f) = named.scenario.first_fault()
+        && f.t < learned_until
+    {
+        eprintln!(
+            "{who}: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later; or give the monitor --calibrate-until)",
+            f.actuator, f.t
+        );
+    }
+}
+
 fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
     use ahcmon::link::simulate::{FlyOptions, fly};
     use ahcmon::output::jsonl::JsonlWriter;
@@ -637,18 +654,7 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
         .map(|x| in_range("--speed", x, SPEED_RANGE.0, SPEED_RANGE.1))
         .transpose()?;
     let spec: Option<ConnSpec> = o.out.as_deref().map(str::parse).transpose()?;
-    // A monitor with default settings takes the first settle + calibration seconds of the
-    // flight as healthy: a fault in them becomes the vehicle's normal.
-    let defaults = PipelineConfig::default();
-    let learned_until = defaults.settle_s + defaults.calibrate_s;
-    if let Some(f) = named.scenario.first_fault()
-        && f.t < learned_until
-    {
-        eprintln!(
-            "sim: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later; or give the monitor --calibrate-until)",
-            f.actuator, f.t
-        );
-    }
+    warn_fault_in_calibration("sim", named);
     let mut tlog = o
         .tlog
         .as_deref()

@@ -638,6 +638,20 @@ fn sim_warns_of_a_fault_in_the_monitors_calibration_stretch() {
     let (code, _, err) = ahcmon(&["sim", "--scenario", "quad-x-motor2-loe-live", "--tlog", t]);
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("warning"), "{err}");
+    // The demo flies the same stream into its own monitor, and said nothing.
+    let (code, _, err) = ahcmon(&[
+        "demo",
+        "--headless",
+        "--scenario",
+        "quad-x-motor2-loe",
+        "--speed",
+        "20",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("demo: warning: the fault on motor2 at 15 s"),
+        "{err}"
+    );
 }
 
 /// The records of a .tlog (8-byte time, then one MAVLink v1 or v2 frame) as (start, msgid).
