@@ -134,7 +134,8 @@ enum Command {
     /// on exit (ctrl-c).
     Monitor {
         /// udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT,
-        /// tcpout:HOST:PORT or serial:DEVICE:BAUD.
+        /// tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: and tcp: are udpin: and tcpout:, as in
+        /// MAVProxy).
         conn: String,
         #[command(flatten)]
         run: RunArgs,

@@ -90,6 +90,16 @@ fn bad_arguments_exit_2() {
         &["monitor", "udpin:127.0.0.1:0", "--link-timeout", "1e300"],
         &["--link-timeout 1e300", "between"],
     );
+    // A connection string without its address, a baud rate of 0.
+    assert_one_line_error(&["monitor", "udpin"], &["`udpin` needs an address"]);
+    assert_one_line_error(&["monitor", "serial:/dev/ttyS0:0"], &["baud rate 0"]);
+    // A device that cannot be opened is named (it said only "No such file or directory").
+    let (code, _, err) = ahcmon(&["monitor", "serial:/dev/ahcmon-no-such-tty:57600"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("cannot open serial device /dev/ahcmon-no-such-tty"),
+        "{err}"
+    );
     assert_one_line_error(
         &[
             "sim",

@@ -23,7 +23,7 @@ const SEND_WRITE_TIMEOUT: Duration = Duration::from_millis(100);
 #[derive(Debug, Error)]
 pub enum ConnError {
     #[error(
-        "connection `{0}`: {1}; expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD"
+        "connection `{0}`: {1}; expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: is udpin:, tcp: is tcpout:)"
     )]
     Syntax(String, String),
     #[error("connection `{spec}`: {source}")]
@@ -44,13 +44,32 @@ pub enum ConnSpec {
     Serial(String, u32),
 }
 
+/// Connection kinds (`udp` is `udpin`, `tcp` is `tcpout`, as in MAVProxy and pymavlink).
+const KINDS: [&str; 8] = [
+    "udpin", "udp", "udpout", "udpbcast", "tcpin", "tcpout", "tcp", "serial",
+];
+
+/// An I/O error of opening `spec`, with what was being done (the OS's text alone, "No such
+/// file or directory", named no device).
+fn opening(spec: &ConnSpec, what: String) -> impl Fn(std::io::Error) -> ConnError {
+    let spec = spec.to_string();
+    move |source| ConnError::Io {
+        spec: spec.clone(),
+        source: std::io::Error::new(source.kind(), format!("{what}: {source}")),
+    }
+}
+
 impl FromStr for ConnSpec {
     type Err = ConnError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let bad = |why: String| ConnError::Syntax(s.to_string(), why);
-        let (kind, rest) = s
-            .split_once(':')
-            .ok_or_else(|| bad("no kind before a `:`".into()))?;
+        let (kind, rest) = s.split_once(':').ok_or_else(|| {
+            if KINDS.contains(&s) {
+                bad(format!("`{s}` needs an address after a `:`"))
+            } else {
+                bad("no kind before a `:`".into())
+            }
+        })?;
         if kind == "serial" {
             let (dev, baud) = rest
                 .rsplit_once(':')
@@ -61,12 +80,12 @@ impl FromStr for ConnSpec {
             if dev.is_empty() {
                 return Err(bad("no device".into()));
             }
+            if baud == 0 {
+                return Err(bad("baud rate 0".into()));
+            }
             return Ok(Self::Serial(dev.to_string(), baud));
         }
-        if !matches!(
-            kind,
-            "udpin" | "udp" | "udpout" | "udpbcast" | "tcpin" | "tcpout" | "tcp"
-        ) {
+        if !KINDS.contains(&kind) {
             return Err(bad(format!("unknown kind `{kind}`")));
         }
         let (host, port) = rest
@@ -161,13 +180,11 @@ pub struct Link {
 
 impl Link {
     pub async fn open(spec: ConnSpec) -> Result<Self, ConnError> {
-        let io = |source| ConnError::Io {
-            spec: spec.to_string(),
-            source,
-        };
         let transport = match &spec {
             ConnSpec::UdpIn(a) => Transport::Udp {
-                sock: UdpSocket::bind(a).await.map_err(io)?,
+                sock: UdpSocket::bind(a)
+                    .await
+                    .map_err(opening(&spec, format!("cannot listen on UDP {a}")))?,
                 peer: None,
                 learn_peer: true,
             },
@@ -178,14 +195,18 @@ impl Link {
                     "[::]:0".parse().expect("literal")
                 };
                 Transport::Udp {
-                    sock: UdpSocket::bind(local).await.map_err(io)?,
+                    sock: UdpSocket::bind(local).await.map_err(opening(
+                        &spec,
+                        format!("cannot open a UDP socket on {local}"),
+                    ))?,
                     peer: Some(*a),
                     learn_peer: false,
                 }
             }
             ConnSpec::UdpBcast(a) => {
-                let sock = UdpSocket::bind("0.0.0.0:0").await.map_err(io)?;
-                sock.set_broadcast(true).map_err(io)?;
+                let io = opening(&spec, "cannot open a UDP broadcast socket".into());
+                let sock = UdpSocket::bind("0.0.0.0:0").await.map_err(&io)?;
+                sock.set_broadcast(true).map_err(&io)?;
                 Transport::Udp {
                     sock,
                     peer: Some(*a),
@@ -193,7 +214,9 @@ impl Link {
                 }
             }
             ConnSpec::TcpIn(a) => Transport::TcpIn {
-                listener: TcpListener::bind(a).await.map_err(io)?,
+                listener: TcpListener::bind(a)
+                    .await
+                    .map_err(opening(&spec, format!("cannot listen on TCP {a}")))?,
                 stream: None,
             },
             ConnSpec::TcpOut(a) => {
@@ -212,7 +235,11 @@ impl Link {
                 use tokio_serial::SerialPortBuilderExt;
                 let port = tokio_serial::new(dev.as_str(), *baud)
                     .open_native_async()
-                    .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+                    .map_err(|e| {
+                        opening(&spec, format!("cannot open serial device {dev}"))(
+                            std::io::Error::other(e.to_string()),
+                        )
+                    })?;
                 Transport::Serial(Box::new(port))
             }
         };
@@ -412,6 +439,8 @@ mod tests {
             ("udpin:1234", "no port"),
             ("udpin:[::1]", "no port"),
             ("nocolon", "no kind"),
+            ("udpin", "`udpin` needs an address after a `:`"),
+            ("serial:/dev/ttyS0:0", "baud rate 0"),
             ("foo:127.0.0.1:5", "unknown kind `foo`"),
             ("serial:/dev/ttyUSB0:fast", "baud rate `fast`"),
             ("serial::57600", "no device"),
