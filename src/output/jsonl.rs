@@ -14,6 +14,9 @@ use std::path::Path;
 pub struct JsonlWriter<W: Write> {
     out: W,
     pub lines: u64,
+    /// The file's name, for its write errors (a full disk said only "No space left on device",
+    /// not whether the decisions or the estimates were lost).
+    name: Option<String>,
 }
 
 impl JsonlWriter<BufWriter<File>> {
@@ -21,16 +24,29 @@ impl JsonlWriter<BufWriter<File>> {
     pub fn create(path: &Path) -> std::io::Result<Self> {
         let file = File::create(path)
             .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
-        Ok(Self::new(BufWriter::new(file)))
+        let mut w = Self::new(BufWriter::new(file));
+        w.name = Some(path.display().to_string());
+        Ok(w)
     }
 }
 
 impl<W: Write> JsonlWriter<W> {
     pub fn new(out: W) -> Self {
-        Self { out, lines: 0 }
+        Self {
+            out,
+            lines: 0,
+            name: None,
+        }
     }
 
     pub fn write<T: Serialize>(&mut self, record: &T) -> std::io::Result<()> {
+        self.write_line(record).map_err(|e| match &self.name {
+            Some(name) => std::io::Error::new(e.kind(), format!("{name}: {e}")),
+            None => e,
+        })
+    }
+
+    fn write_line<T: Serialize>(&mut self, record: &T) -> std::io::Result<()> {
         serde_json::to_writer(&mut self.out, record)?;
         self.out.write_all(b"\n")?;
         self.out.flush()?;
