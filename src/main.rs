@@ -79,6 +79,13 @@ enum Command {
     /// Calibrate each vehicle's decision threshold on healthy Monte-Carlo flights: the smallest
     /// threshold at which no healthy flight would raise a fault, times a margin. Flown with
     /// seeds from 1001 on, which the tests and `eval` do not use.
+    ///
+    /// Two rows per scenario, one per statistic: `deviation` (the effective output's deviation
+    /// attributed to an actuator) and `gain` (angle outputs' gain statistic). Columns:
+    /// `alarm-free ukf` / `alarm-free set`, the smallest threshold at which the MIT-UKF's / the
+    /// MIT-ESMF's statistic raised no alarm on any flight; `max ukf` / `max set`, the largest
+    /// value of that statistic seen after the warm-up; `recommended`, 1.25 × the larger
+    /// alarm-free threshold; `profile`, the built-in profile's threshold now ("-": none).
     Thresholds {
         /// Healthy vehicle scenarios (default: the built-in *-healthy-gusts flights).
         scenarios: Vec<String>,
