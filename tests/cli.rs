@@ -205,6 +205,23 @@ fn a_full_disk_is_reported_and_the_summary_still_printed() {
 
 /// `--speed` on a log whose first timestamp is garbage (zero): the replay skips the
 /// impossible wait instead of sleeping for decades.
+/// The summary's state of an actuator whose fault cleared says so and when (its estimates may
+/// still be on their way back); one never decided is "healthy".
+#[test]
+fn the_summary_says_which_fault_cleared_and_when() {
+    let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let (code, out, err) = ahcmon(&["replay", log.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    let row = |name: &str| {
+        out.lines()
+            .find(|l| l.trim_start().starts_with(name))
+            .unwrap_or_else(|| panic!("no {name} row: {out}"))
+            .to_string()
+    };
+    assert!(row("motor1 ").ends_with("cleared at t=136.62 s"), "{out}");
+    assert!(row("motor2 ").ends_with("healthy"), "{out}");
+}
+
 #[test]
 fn paced_replay_does_not_sleep_through_a_garbage_timestamp() {
     let dir = common::temp_dir("cli_paced_garbage");

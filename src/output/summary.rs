@@ -108,7 +108,24 @@ pub fn render(
                 .iter()
                 .filter(|d| d.sysid == *sysid && d.actuator.as_deref() == Some(a.name.as_str()))
                 .count();
-            let state = p.active[j].map_or("healthy", |c| c.as_str());
+            // With no fault in force: "healthy", or when its fault was cleared, since when
+            // (the estimates may still be on their way back: quad + motor 1 read gamma 0.87
+            // [0.85, 0.89] a while after its clearing, beside a bare "healthy").
+            use crate::diagnose::vehicle::Event;
+            let cleared = decisions
+                .iter()
+                .rev()
+                .find(|d| {
+                    d.sysid == *sysid
+                        && d.actuator.as_deref() == Some(a.name.as_str())
+                        && matches!(d.event, Event::Fault | Event::Changed | Event::Cleared)
+                })
+                .filter(|d| d.event == Event::Cleared)
+                .map(|d| format!("cleared at t={:.2} s", d.t));
+            let state = match p.active[j] {
+                Some(c) => c.as_str().to_string(),
+                None => cleared.unwrap_or_else(|| "healthy".into()),
+            };
             for (f, name) in FILTER_NAMES.iter().enumerate() {
                 let e = est[f][j];
                 let _ = writeln!(
@@ -130,7 +147,7 @@ pub fn render(
                     e.q_gamma,
                     e.q_delta,
                     if f == 0 { n.to_string() } else { String::new() },
-                    if f == 0 { state } else { "" }
+                    if f == 0 { state.as_str() } else { "" }
                 );
             }
         }
