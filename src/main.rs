@@ -981,6 +981,7 @@ fn calibrate(
     };
     let base = calibrated.name.clone();
     calibrated.name = format!("{base}-calibrated");
+    calibrated.identified = true;
     let axes = ["roll", "pitch", "yaw", "a_z"];
     let (samples, quality): (usize, Vec<String>) = match (&fit, &arx) {
         (Some(fit), _) => (

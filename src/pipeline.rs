@@ -189,6 +189,10 @@ pub struct PipelineCounters {
 const JOINED_IN_FLIGHT_S: f64 = 30.0;
 /// A calibration stretch shorter than this (s) is warned about.
 const SHORT_CALIBRATION_S: f64 = 10.0;
+/// With a profile whose model `ahcmon calibrate` identified, the samples collected after the
+/// settle before estimating (s): enough to measure the sample period and seed the command
+/// history, nothing is fitted.
+const AS_IS_SEED_S: f64 = 1.0;
 const JOINED_WARNING: &str = "no take-off seen";
 
 pub struct VehiclePipeline {
@@ -536,17 +540,21 @@ impl VehiclePipeline {
                                 sink.message(self.sysid, &format!("warning: {w}"));
                             }
                         }
+                        let next = if d.profile.identified && self.cfg.calibrate_until.is_none() {
+                            "its identified model as it is (no calibration in flight)"
+                        } else {
+                            "calibrating"
+                        };
                         sink.message(
                             self.sysid,
-                            &format!(
-                                "airborne at t={since:.2} s; profile {}; calibrating",
-                                d.source
-                            ),
+                            &format!("airborne at t={since:.2} s; profile {}; {next}", d.source),
                         );
                         // Joined a flight under way (a vehicle up for a while, and no sample
                         // on the ground): whatever it flies with now is taken as healthy. A
                         // simulator's flight starts airborne at boot, and is not warned about.
+                        let as_is = d.profile.identified && self.cfg.calibrate_until.is_none();
                         if !self.seen_grounded
+                            && !as_is
                             && since >= JOINED_IN_FLIGHT_S
                             && self.warned.insert(JOINED_WARNING.into())
                         {
@@ -601,6 +609,7 @@ impl VehiclePipeline {
                 }
                 let done = match self.cfg.calibrate_until {
                     Some(until) => s.t >= until,
+                    None if profile.identified => s.t - start >= AS_IS_SEED_S,
                     None => s.t - start >= self.cfg.calibrate_s,
                 };
                 if done {
@@ -836,6 +845,10 @@ impl VehiclePipeline {
         if profile.model.dynamics == Dynamics::Arx && profile.model.measure_az {
             profile.model.measure_az = false;
         }
+        if profile.identified && self.cfg.calibrate_until.is_none() {
+            self.run_identified(profile, samples, dt, sink);
+            return;
+        }
         // The outputs of sample k act until sample k+1: pair each rate with the previous outputs.
         // A pair whose interval is not one period (a dropped or late sample, a link gap) is left
         // out; the next pair then starts a new run, so no fit row spans the hole. A sample
@@ -1030,6 +1043,51 @@ impl VehiclePipeline {
                 ),
             );
         }
+        self.run_with(calibrated, fit, samples, dt, sink);
+    }
+
+    /// A profile `ahcmon calibrate` wrote: its model is this vehicle's, identified on a healthy
+    /// stretch, and is used as it is (a fault present from the take-off is then seen, where a
+    /// calibration in flight would take it as the vehicle's normal).
+    fn run_identified(
+        &mut self,
+        profile: Profile,
+        samples: &[StoredSample],
+        dt: f64,
+        sink: &mut dyn PipelineSink,
+    ) {
+        let expected = 1.0 / profile.rate_hz;
+        if ((dt - expected) / expected).abs() > 0.1 {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: the telemetry comes every {:.1} ms, the profile's model was identified at {:.1} ms: its noise levels (and a helicopter's discrete model) are for another rate; calibrate at this rate (ahcmon calibrate, or --calibrate-until)",
+                    dt * 1e3,
+                    expected * 1e3
+                ),
+            );
+        }
+        sink.message(
+            self.sysid,
+            &format!(
+                "estimating with the profile's identified model ({}), not calibrated in flight",
+                profile.name
+            ),
+        );
+        self.run_with(profile, None, samples, dt, sink);
+    }
+
+    /// Build the filters and the diagnosis on `calibrated` and start estimating, seeded with
+    /// the end of the stored stretch.
+    fn run_with(
+        &mut self,
+        calibrated: Profile,
+        fit: Option<ScaledFit>,
+        samples: &[StoredSample],
+        dt: f64,
+        sink: &mut dyn PipelineSink,
+    ) {
+        let l = calibrated.actuators.len();
         let filters = match build(&calibrated, dt) {
             Ok(f) => f,
             Err(e) => {

@@ -935,6 +935,68 @@ fn a_heli_on_a_lossy_link_is_not_estimated_with_a_geometry_fitted_on_holes() {
     assert!(faults.is_empty(), "{faults:?}");
 }
 
+/// `ahcmon calibrate` on one healthy flight, then a later flight whose fault comes within what
+/// a monitor would calibrate on in flight (15 s after take-off): with the calibrated profile the
+/// model is used as it is, and the fault is found; without it the fault is calibrated in.
+#[test]
+fn a_calibrated_profile_sees_a_fault_from_the_take_off() {
+    let dir = common::temp_dir("cli_calibrated_profile");
+    let (healthy, faulty) = (dir.join("healthy.tlog"), dir.join("faulty.tlog"));
+    for (scenario, log) in [
+        ("quad-x-motor2-loe-live", &healthy),
+        ("quad-x-motor2-loe", &faulty),
+    ] {
+        let (code, _, err) = ahcmon(&[
+            "sim",
+            "--scenario",
+            scenario,
+            "--tlog",
+            log.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+    }
+    // The -live flight is healthy until 30 s after its take-off (t = 10 s).
+    let profile = dir.join("quad.toml");
+    let (code, _, err) = ahcmon(&[
+        "calibrate",
+        healthy.to_str().unwrap(),
+        "--until",
+        "38",
+        "-o",
+        profile.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let first_fault = |extra: &[&str]| {
+        let decisions = dir.join("d.jsonl");
+        let mut args = vec![
+            "replay",
+            faulty.to_str().unwrap(),
+            "--headless",
+            "--decisions",
+            decisions.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let (code, _, err) = ahcmon(&args);
+        assert_eq!(code, 0, "{err}");
+        std::fs::read_to_string(&decisions)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .find(|d| d["event"] == "fault")
+    };
+    // Motor 2 at 0.6 from t = 25 s.
+    let d = first_fault(&["--profile", profile.to_str().unwrap()]).expect("a fault decided");
+    assert_eq!(d["actuator"], "motor2", "{d}");
+    let t = d["t"].as_f64().unwrap();
+    assert!((25.0..26.0).contains(&t), "{d}");
+    // Calibrated in flight (t = 13-33 s), the loss is the vehicle's normal.
+    let d = first_fault(&[]);
+    assert!(
+        d.as_ref().is_none_or(|d| d["actuator"] != "motor2"),
+        "{d:?}"
+    );
+}
+
 /// A calibration stretch cut to 3.8 s still fits, and is warned about; the default 20 s is not.
 #[test]
 fn a_short_calibration_stretch_is_warned_about() {

@@ -293,14 +293,23 @@ fn calibrate_writes_a_profile_that_replay_uses() {
     );
     let p = Profile::resolve(out.to_str().unwrap()).unwrap();
     assert_eq!(p.name, "quad-x-calibrated");
+    assert!(p.identified);
     // The identified X pattern: motor 1 (front right) rolls left and pitches up.
     let g = p.actuators[0].effectiveness.unwrap();
     assert!(g[0] < 0.0 && g[1] > 0.0, "{g:?}");
-    // Re-running on the calibrated profile needs (almost) no rescaling.
+    // The replay uses the identified model as it is (no calibration in flight).
     let c = replay(
         "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
         Some(out.to_str().unwrap()),
     );
+    assert!(
+        c.messages
+            .iter()
+            .any(|m| m.starts_with("estimating with the profile's identified model")),
+        "{:?}",
+        c.messages
+    );
+    assert!(!c.messages.iter().any(|m| m.starts_with("calibrated on")));
     assert!(
         c.decisions
             .iter()

@@ -182,6 +182,11 @@ pub struct Profile {
     pub vehicle: VehicleKind,
     /// Telemetry rate the noise levels refer to (Hz).
     pub rate_hz: f64,
+    /// Written by `ahcmon calibrate`: the model was identified on a healthy stretch of this
+    /// vehicle's telemetry, and a monitor given this profile uses it as it is, from the
+    /// take-off on, instead of calibrating in flight (`--calibrate-until` calibrates anew).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub identified: bool,
     pub model: ModelSpec,
     pub noise: NoiseSpec,
     /// Decision settings calibrated for this vehicle on healthy Monte-Carlo flights.
