@@ -125,7 +125,7 @@ enum Command {
         tlog: Option<PathBuf>,
         /// Multiple of real time for --out (default 1); without --out the tlog is written as
         /// fast as possible.
-        #[arg(long, value_name = "X")]
+        #[arg(long, value_name = "X", allow_negative_numbers = true)]
         speed: Option<f64>,
         /// MAVLink system id of the simulated vehicle.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=254))]
@@ -151,7 +151,12 @@ enum Command {
         #[arg(long)]
         headless: bool,
         /// A vehicle silent this long (s) gets a link_lost decision.
-        #[arg(long, default_value_t = 2.0, value_name = "S")]
+        #[arg(
+            long,
+            default_value_t = 2.0,
+            value_name = "S",
+            allow_negative_numbers = true
+        )]
         link_timeout: f64,
         /// Exit after this long (s) without any frame, once frames have arrived (e.g. at the
         /// end of a simulated flight).
@@ -191,7 +196,12 @@ enum Command {
         #[arg(long, value_name = "CONN")]
         alerts: Option<String>,
         /// Multiple of real time (e.g. 4 for a quick look).
-        #[arg(long, default_value_t = 1.0, value_name = "X")]
+        #[arg(
+            long,
+            default_value_t = 1.0,
+            value_name = "X",
+            allow_negative_numbers = true
+        )]
         speed: f64,
     },
     /// Identify a vehicle's model (D, G, c and the noise levels) from a healthy stretch of a
@@ -201,7 +211,7 @@ enum Command {
         file: PathBuf,
         /// End of the healthy stretch (vehicle time, s since boot, as in the decisions' `t`);
         /// it starts when the vehicle is airborne and settled.
-        #[arg(long, value_name = "T")]
+        #[arg(long, value_name = "T", allow_negative_numbers = true)]
         until: f64,
         /// The profile file to write.
         #[arg(short = 'o', long = "output", value_name = "PROFILE.toml")]
@@ -219,7 +229,12 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
         /// Replay at this multiple of real time instead of as fast as possible.
-        #[arg(long, value_name = "X", conflicts_with = "fast")]
+        #[arg(
+            long,
+            value_name = "X",
+            conflicts_with = "fast",
+            allow_negative_numbers = true
+        )]
         speed: Option<f64>,
         /// As fast as the CPU goes (the default).
         #[arg(long)]
@@ -252,7 +267,7 @@ struct RunArgs {
     decimate: u64,
     /// End the healthy calibration stretch at this vehicle time (s since boot, as in the
     /// decisions' `t`); default: the first 20 s after take-off.
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
     calibrate_until: Option<f64>,
 }
 
@@ -630,7 +645,6 @@ const MAX_PACE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
 const SPEED_RANGE: (f64, f64) = (1e-3, 1e6);
 const TIMEOUT_RANGE_S: (f64, f64) = (1e-3, 1e6);
 
-/// The simulated vehicle as a MAVLink autopilot: to a live connection and/or a tlog.
 /// A monitor with default settings takes the first settle + calibration seconds of the
 /// flight as healthy: a scenario's fault in them becomes the vehicle's normal. Said by `sim`
 /// and `demo` (`demo --scenario quad-x-motor2-loe` decided only a wrong motor, silently).
@@ -641,12 +655,19 @@ fn warn_fault_in_calibration(who: &str, named: &NamedScenario) {
         && f.t < learned_until
     {
         eprintln!(
-            "{who}: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later; or give the monitor --calibrate-until)",
-            f.actuator, f.t
+            "{who}: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later{})",
+            f.actuator,
+            f.t,
+            if who == "sim" {
+                "; or give the monitor --calibrate-until, or a profile ahcmon calibrate identified"
+            } else {
+                ""
+            }
         );
     }
 }
 
+/// The simulated vehicle as a MAVLink autopilot: to a live connection and/or a tlog.
 fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
     use ahcmon::link::simulate::{FlyOptions, fly};
     use ahcmon::output::jsonl::JsonlWriter;
@@ -1318,6 +1339,13 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
             .collect::<Result<_, _>>()?
     };
     if let Some(dir) = &plot {
+        if dir.exists() && !dir.is_dir() {
+            return Err(UsageError(format!(
+                "--plot {}: a file, not a directory (one SVG per scenario is written into it)",
+                dir.display()
+            ))
+            .into());
+        }
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create plot directory {}", dir.display()))?;
     }

@@ -56,6 +56,7 @@ pub trait PipelineSink {
     fn link_event(&mut self, d: &Decision);
 }
 
+#[derive(Clone, Copy)]
 struct StoredSample {
     t: f64,
     rates: [f64; 3],
@@ -299,17 +300,12 @@ impl VehiclePipeline {
     /// (`None` for the target when it ends at `--calibrate-until`).
     pub fn calibration_progress(&self) -> Option<(f64, Option<f64>)> {
         match &self.stage {
-            Stage::Calibrating { samples, .. } => {
+            Stage::Calibrating { samples, profile } => {
                 let done = match (samples.first(), samples.last()) {
                     (Some(a), Some(b)) => b.t - a.t,
                     _ => 0.0,
                 };
-                let target = self
-                    .cfg
-                    .calibrate_until
-                    .is_none()
-                    .then_some(self.cfg.calibrate_s);
-                Some((done, target))
+                Some((done, Self::stretch_s(&self.cfg, profile)))
             }
             _ => None,
         }
@@ -322,11 +318,15 @@ impl VehiclePipeline {
             return None;
         }
         // Still calibrating when the data ended.
-        if let Stage::Calibrating { samples, .. } = &self.stage {
+        if let Stage::Calibrating { samples, profile } = &self.stage {
             let (first, last) = (samples.first()?.t, samples.last()?.t);
             return Some(match self.cfg.calibrate_until {
                 Some(until) => format!(
                     "the calibration stretch was chosen to end at t={until} s, but the data end at t={last:.2} s (it began at t={first:.2} s)"
+                ),
+                None if profile.identified => format!(
+                    "the data end {:.1} s into the {AS_IS_SEED_S} s that measure the sample period before the profile's identified model is used",
+                    last - first
                 ),
                 None => format!(
                     "the data end {:.1} s into the {} s calibration stretch",
@@ -382,6 +382,17 @@ impl VehiclePipeline {
         sink.message(self.sysid, &format!("error: {why}"));
         self.failure = Some(why);
         self.stage = Stage::Failed;
+    }
+
+    /// How long the stretch stored after the settle lasts (s), when not to `--calibrate-until`:
+    /// the calibration's, or with a profile `ahcmon calibrate` identified, only the seconds
+    /// that measure the sample period.
+    fn stretch_s(cfg: &PipelineConfig, profile: &Profile) -> Option<f64> {
+        match cfg.calibrate_until {
+            Some(_) => None,
+            None if profile.identified => Some(AS_IS_SEED_S),
+            None => Some(cfg.calibrate_s),
+        }
     }
 
     /// Why the run failed, once it has (the estimation stopped for good).
@@ -609,8 +620,9 @@ impl VehiclePipeline {
                 }
                 let done = match self.cfg.calibrate_until {
                     Some(until) => s.t >= until,
-                    None if profile.identified => s.t - start >= AS_IS_SEED_S,
-                    None => s.t - start >= self.cfg.calibrate_s,
+                    None => {
+                        s.t - start >= Self::stretch_s(&self.cfg, profile).unwrap_or(f64::INFINITY)
+                    }
                 };
                 if done {
                     let profile = (**profile).clone();
@@ -1056,6 +1068,28 @@ impl VehiclePipeline {
         dt: f64,
         sink: &mut dyn PipelineSink,
     ) {
+        // A helicopter's discrete model holds only at the rate it was identified at (the filters
+        // refuse one more than 5 % off): calibrate in flight instead, on the samples so far.
+        if let Some(arx) = &profile.model.arx
+            && (arx.dt - dt).abs() > crate::model::ARX_DT_TOLERANCE * dt
+        {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: the telemetry comes every {:.1} ms, the profile's identified model is for {:.1} ms: calibrating in flight instead ({} s)",
+                    dt * 1e3,
+                    arx.dt * 1e3,
+                    self.cfg.calibrate_s
+                ),
+            );
+            let mut profile = profile;
+            profile.identified = false;
+            self.stage = Stage::Calibrating {
+                profile: Box::new(profile),
+                samples: samples.to_vec(),
+            };
+            return;
+        }
         let expected = 1.0 / profile.rate_hz;
         if ((dt - expected) / expected).abs() > 0.1 {
             sink.message(

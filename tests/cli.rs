@@ -90,6 +90,23 @@ fn bad_arguments_exit_2() {
         &["monitor", "udpin:127.0.0.1:0", "--link-timeout", "1e300"],
         &["--link-timeout 1e300", "between"],
     );
+    // A negative value reaches the range check (clap took it for an unknown flag).
+    assert_one_line_error(
+        &["replay", "does/not/matter.tlog", "--speed", "-1"],
+        &["--speed -1", "between"],
+    );
+    // --plot names a directory.
+    let file = common::temp_dir("cli_plot_file").join("not-a-dir");
+    std::fs::write(&file, "").unwrap();
+    assert_one_line_error(
+        &[
+            "eval",
+            "paper-fig5-gaussian",
+            "--plot",
+            file.to_str().unwrap(),
+        ],
+        &["a file, not a directory"],
+    );
     // A connection string without its address, a baud rate of 0.
     assert_one_line_error(&["monitor", "udpin"], &["`udpin` needs an address"]);
     assert_one_line_error(&["monitor", "serial:/dev/ttyS0:0"], &["baud rate 0"]);
@@ -203,8 +220,6 @@ fn a_full_disk_is_reported_and_the_summary_still_printed() {
     assert!(out.contains("replayed "), "no summary: {out}");
 }
 
-/// `--speed` on a log whose first timestamp is garbage (zero): the replay skips the
-/// impossible wait instead of sleeping for decades.
 /// The summary's state of an actuator whose fault cleared says so and when (its estimates may
 /// still be on their way back); one never decided is "healthy".
 #[test]
@@ -222,6 +237,8 @@ fn the_summary_says_which_fault_cleared_and_when() {
     assert!(row("motor2 ").ends_with("healthy"), "{out}");
 }
 
+/// `--speed` on a log whose first timestamp is garbage (zero): the replay skips the
+/// impossible wait instead of sleeping for decades.
 #[test]
 fn paced_replay_does_not_sleep_through_a_garbage_timestamp() {
     let dir = common::temp_dir("cli_paced_garbage");

@@ -333,6 +333,54 @@ fn calibrate_writes_a_profile_that_replay_uses() {
     );
 }
 
+/// A helicopter's identified profile at another telemetry rate than it was identified at: its
+/// discrete model does not hold there, so the monitor calibrates in flight instead (it used to
+/// fail the run for good).
+#[test]
+fn a_helicopter_profile_identified_at_another_rate_calibrates_in_flight() {
+    let dir = common::temp_dir("sitl_heli_identified_rate");
+    let rel = "sitl_heli_servo1_gain0p7/arducopter-heli_sitl_servo1_mul0.7.tlog";
+    let out = dir.join("heli.toml");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .arg("calibrate")
+        .arg(tlog(rel))
+        .args(["--until", "110", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut p = Profile::resolve(out.to_str().unwrap()).unwrap();
+    assert!(p.identified && p.model.arx.is_some());
+    // At its own rate the model is used as it is.
+    let c = replay(rel, Some(out.to_str().unwrap()));
+    assert!(
+        c.messages
+            .iter()
+            .any(|m| m.starts_with("estimating with the profile's"))
+    );
+    // As if identified at 40 Hz (this log is 50 Hz).
+    p.model.arx.as_mut().unwrap().dt = 0.025;
+    p.rate_hz = 40.0;
+    let other = dir.join("heli-40hz.toml");
+    std::fs::write(&other, toml::to_string(&p).unwrap()).unwrap();
+    let c = replay(rel, Some(other.to_str().unwrap()));
+    assert!(
+        c.messages
+            .iter()
+            .any(|m| m.contains("calibrating in flight instead")),
+        "{:?}",
+        c.messages
+    );
+    assert!(c.messages.iter().any(|m| m.starts_with("calibrated on")));
+    // And the fault is found (SOURCE.md: servo 1 from t = 115.55 s).
+    let (_, both) = only_faults_on(&c, 115.55, "swash1");
+    assert!(both.t - 115.55 <= 2.0, "{both:?}");
+}
+
 #[test]
 fn replay_plot_of_the_heli_log_is_valid_svg_with_the_fault_marked() {
     let dir = common::temp_dir("sitl_plot");

@@ -1220,9 +1220,9 @@ impl Diagnoser {
                             .is_some_and(|r| r.actuator == j && r.kind == ChangeKind::Stuck)
                         && self.data_class(j).is_none_or(|c| c == FaultClass::Stuck);
                     // Back within the tolerances at the operating point (gain near 1, the
-                    // effective output near the command) with no new step in the data's stored
-                    // stretch: the fault is ending, and the clearing follows once the alarms
-                    // have decayed. A class read meanwhile is the recovery's: the SITL quad X's
+                    // effective output near the command) with no step inside the data's stored
+                    // 6 s (neither the fault's own onset nor a later change): the fault is
+                    // ending, and the clearing follows once the alarms have decayed. A class read meanwhile is the recovery's: the SITL quad X's
                     // motor 4 read stuck at 0.60 for the 1.3 s between its fault's end and the
                     // clearing (its unwinding integrators held the output level), the quad +
                     // and TradHeli logs read bias. (A stuck output near its command is within
@@ -1341,9 +1341,11 @@ impl Diagnoser {
             FaultClass::Bias => format!("a gain of {:.2}", 1.0 + effect / mean),
             _ => return None,
         };
+        // Under 1 % with a decimal ("moved only 0 %" read as not at all).
+        let pct = 100.0 * sd / mean.abs();
+        let prec = usize::from(pct < 1.0);
         Some(format!(
-            "the command moved only {:.0} % about {mean:.2}, where a gain change and an offset look alike: {other} would fit as well",
-            100.0 * sd / mean.abs()
+            "the command moved only {pct:.prec$} % about {mean:.2}, where a gain change and an offset look alike: {other} would fit as well"
         ))
     }
 

@@ -11,7 +11,7 @@ mod paper_heli;
 mod rate;
 
 pub use paper_heli::{PaperHeli, PaperHeliParams};
-pub use rate::{ArxParams, MAX_ACTUATORS, RateModel, RateModelError, RateParams};
+pub use rate::{ARX_DT_TOLERANCE, ArxParams, MAX_ACTUATORS, RateModel, RateModelError, RateParams};
 
 /// Longest input vector any model takes.
 pub const MAX_INPUTS: usize = MAX_ACTUATORS + 3;

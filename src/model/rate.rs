@@ -31,6 +31,10 @@ use nalgebra::{SMatrix, SVector};
 use super::{BilinearTerm, Model};
 
 /// Most actuators a model can have (an octocopter).
+/// How far (relative) the sample period may be from the one an identified discrete model was
+/// identified at.
+pub const ARX_DT_TOLERANCE: f64 = 0.05;
+
 pub const MAX_ACTUATORS: usize = 8;
 
 /// Continuous-time parameters of the rate-effectiveness model.
@@ -199,7 +203,7 @@ impl<const N: usize, const M: usize> RateModel<N, M> {
         let l = params.input.len();
         Self::check(l, params.vertical.len(), dt)?;
         // The parameters are per step: another period would need another identification.
-        if params.dt.is_nan() || (params.dt - dt).abs() > 0.05 * dt {
+        if params.dt.is_nan() || (params.dt - dt).abs() > ARX_DT_TOLERANCE * dt {
             return Err(RateModelError::Period {
                 model: params.dt,
                 dt,

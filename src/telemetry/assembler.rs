@@ -165,14 +165,14 @@ enum AzSource {
 /// A locked a_z source silent this long (s) gives way to another.
 const AZ_SOURCE_SILENT_S: f64 = 1.0;
 
-/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
-/// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
-/// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
 /// Whether `t` can be on the same new clock as `first`, the first message seen on it.
 fn on_new_clock(first: f64, t: f64) -> bool {
     (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t)
 }
 
+/// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
+/// the latest reading not more than a second ahead of it. (Rounding to the nearest would put a
+/// stamp just after a reboot, late in a wrap period, a whole period ahead: never "behind".)
 fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
     let raw = f64::from(stamp) * 1e-6;
     match reference_s {
@@ -345,9 +345,9 @@ impl VehicleAssembler {
         let stamp = self.clock_stamp(compid, msg, None);
         let ahead = stamp.filter(|&t| self.clock.is_some_and(|c| t > c + REBOOT_BACKSTEP_S));
         // Only the next message on a clock decides (not a heartbeat or an IMU message). A u32
-        // µs stamp (which can never read ahead of the clock it is unwrapped next to) confirms
-        // if it falls next to the held one: a log that starts with SERVO_OUTPUT_RAW after
-        // 71.6 min of uptime has its clock set a wrap period or more behind the ATTITUDE's.
+        // µs stamp confirms if, unwrapped next to the held one, it falls next to it: a log that
+        // starts with SERVO_OUTPUT_RAW after 71.6 min of uptime has its clock set a wrap period
+        // or more behind the ATTITUDE's, and next to that clock the stamp reads a period off.
         if stamp.is_some()
             && let Some((held_t, held_compid, held)) = self.held_ahead.take()
         {

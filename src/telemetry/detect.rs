@@ -4,7 +4,7 @@
 
 use super::assembler::VehicleInfo;
 use super::profile::{Profile, ProfileError, Role, VehicleKind};
-use crate::link::dialects::ahcmon::MavType;
+use crate::link::dialects::ahcmon::{MavAutopilot, MavType};
 use thiserror::Error;
 
 #[derive(Debug, Error)]
@@ -82,6 +82,12 @@ pub fn detect(info: &VehicleInfo) -> Result<Detection, DetectError> {
             Some(other) => {
                 warnings.push(format!(
                     "sysid {sysid}: FRAME_TYPE {other} has no built-in profile; assuming quad X; --profile overrides"
+                ));
+                "quad-x"
+            }
+            None if info.autopilot == Some(MavAutopilot::MAV_AUTOPILOT_PX4) => {
+                warnings.push(format!(
+                    "sysid {sysid}: PX4 does not say in the stream whether the frame is + or X; assuming quad X (ArduPilot's motor order: check that the outputs are in it, or write a profile); pass --profile quad-plus for a + frame"
                 ));
                 "quad-x"
             }
@@ -343,7 +349,6 @@ pub fn apply_params(profile: &mut Profile, info: &VehicleInfo) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialects::ahcmon::MavAutopilot;
 
     fn info(mav_type: MavType, params: &[(&str, f32)]) -> VehicleInfo {
         VehicleInfo {
