@@ -274,16 +274,13 @@ fn a_profile_for_another_vehicle_is_warned_about_twice() {
     assert!(warned(&run, "worse than a constant"), "{:?}", run.messages);
 }
 
-#[test]
-fn calibrate_writes_a_profile_that_replay_uses() {
-    let dir = common::temp_dir("sitl_calibrate");
-    let out = dir.join("quadx.toml");
-    let log = tlog("sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog");
+/// `ahcmon calibrate LOG --until UNTIL -o OUT`, and the profile it wrote.
+fn calibrated(log: &std::path::Path, until: &str, out: &std::path::Path) -> Profile {
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
         .arg("calibrate")
-        .arg(&log)
-        .args(["--until", "90", "-o"])
-        .arg(&out)
+        .arg(log)
+        .args(["--until", until, "-o"])
+        .arg(out)
         .output()
         .unwrap();
     assert!(
@@ -291,7 +288,15 @@ fn calibrate_writes_a_profile_that_replay_uses() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let p = Profile::resolve(out.to_str().unwrap()).unwrap();
+    Profile::resolve(out.to_str().unwrap()).unwrap()
+}
+
+#[test]
+fn calibrate_writes_a_profile_that_replay_uses() {
+    let dir = common::temp_dir("sitl_calibrate");
+    let out = dir.join("quadx.toml");
+    let log = tlog("sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog");
+    let p = calibrated(&log, "90", &out);
     assert_eq!(p.name, "quad-x-calibrated");
     assert!(p.identified);
     // The identified X pattern: motor 1 (front right) rolls left and pitches up.
@@ -341,19 +346,7 @@ fn a_helicopter_profile_identified_at_another_rate_calibrates_in_flight() {
     let dir = common::temp_dir("sitl_heli_identified_rate");
     let rel = "sitl_heli_servo1_gain0p7/arducopter-heli_sitl_servo1_mul0.7.tlog";
     let out = dir.join("heli.toml");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
-        .arg("calibrate")
-        .arg(tlog(rel))
-        .args(["--until", "110", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let mut p = Profile::resolve(out.to_str().unwrap()).unwrap();
+    let mut p = calibrated(&tlog(rel), "110", &out);
     assert!(p.identified && p.model.arx.is_some());
     // At its own rate the model is used as it is.
     let c = replay(rel, Some(out.to_str().unwrap()));
