@@ -871,7 +871,13 @@ fn monitor(
         };
         let mut ui = if dashboard {
             files.echo = false;
-            let mut ui = ahcmon::output::dashboard::TerminalUi::start(&spec.to_string())
+            // The address actually bound (the demo's udpin:127.0.0.1:0 showed port 0).
+            let shown = match (&spec, local) {
+                (ConnSpec::UdpIn(_), Some(a)) => format!("udpin:{a}"),
+                (ConnSpec::TcpIn(_), Some(a)) => format!("tcpin:{a}"),
+                _ => spec.to_string(),
+            };
+            let mut ui = ahcmon::output::dashboard::TerminalUi::start(&shown)
                 .context("cannot start the dashboard (try --headless)")?;
             if let Some(script) = script {
                 ui.set_note(format!("script: {script}"));
