@@ -68,14 +68,16 @@ impl std::fmt::Display for FrameCounters {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "frames {} · resync {} ({} bytes skipped) · bad_crc {} · unknown_id {} · parse_error {} · truncated {}",
+            // The bytes skipped are the resyncs' and the truncated frames' together ("resync 0
+            // (1 bytes skipped)" read as a contradiction on a cut log).
+            "frames {} · resync {} · bad_crc {} · unknown_id {} · parse_error {} · truncated {} ({} bytes skipped in all)",
             self.frames,
             self.resync,
-            self.skipped_bytes,
             self.bad_crc,
             self.unknown_id,
             self.parse_error,
-            self.truncated
+            self.truncated,
+            self.skipped_bytes
         )?;
         if self.repaired_ts > 0 {
             write!(f, " · repaired timestamps {}", self.repaired_ts)?;
