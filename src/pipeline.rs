@@ -387,6 +387,12 @@ impl VehiclePipeline {
     /// How long the stretch stored after the settle lasts (s), when not to `--calibrate-until`:
     /// the calibration's, or with a profile `ahcmon calibrate` identified, only the seconds
     /// that measure the sample period.
+    /// Whether `profile`'s identified model is used as it is (see [`Profile::identified`]):
+    /// unless `--calibrate-until` asks for a calibration.
+    fn as_is(cfg: &PipelineConfig, profile: &Profile) -> bool {
+        profile.identified && cfg.calibrate_until.is_none()
+    }
+
     fn stretch_s(cfg: &PipelineConfig, profile: &Profile) -> Option<f64> {
         match cfg.calibrate_until {
             Some(_) => None,
@@ -551,7 +557,8 @@ impl VehiclePipeline {
                                 sink.message(self.sysid, &format!("warning: {w}"));
                             }
                         }
-                        let next = if d.profile.identified && self.cfg.calibrate_until.is_none() {
+                        let as_is = Self::as_is(&self.cfg, &d.profile);
+                        let next = if as_is {
                             "its identified model as it is (no calibration in flight)"
                         } else {
                             "calibrating"
@@ -563,7 +570,6 @@ impl VehiclePipeline {
                         // Joined a flight under way (a vehicle up for a while, and no sample
                         // on the ground): whatever it flies with now is taken as healthy. A
                         // simulator's flight starts airborne at boot, and is not warned about.
-                        let as_is = d.profile.identified && self.cfg.calibrate_until.is_none();
                         if !self.seen_grounded
                             && !as_is
                             && since >= JOINED_IN_FLIGHT_S
@@ -857,7 +863,7 @@ impl VehiclePipeline {
         if profile.model.dynamics == Dynamics::Arx && profile.model.measure_az {
             profile.model.measure_az = false;
         }
-        if profile.identified && self.cfg.calibrate_until.is_none() {
+        if Self::as_is(&self.cfg, &profile) {
             self.run_identified(profile, samples, dt, sink);
             return;
         }
