@@ -4,7 +4,7 @@
 
 mod common;
 
-use ahcmon::diagnose::vehicle::{Decision, Event};
+use ahcmon::diagnose::vehicle::{Decision, Event, FaultClass};
 use ahcmon::estimate::vehicle::AhcEstimate;
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
@@ -106,6 +106,23 @@ fn cleared_without_a_new_class(c: &Collect, off: f64, actuator: &str) {
     );
 }
 
+/// The class said of the actuator never goes back to one it has left (no loss, bias, loss,
+/// bias as the change test's reading of a gain-and-offset fault alternates).
+fn no_class_returns(c: &Collect, actuator: &str) {
+    let mut said: Vec<FaultClass> = Vec::new();
+    for d in c
+        .decisions
+        .iter()
+        .filter(|d| is_fault(d) && d.actuator.as_deref() == Some(actuator))
+    {
+        let class = d.class.expect("a fault decision has a class");
+        if said.last() != Some(&class) {
+            assert!(!said.contains(&class), "{said:?} then {class:?}");
+            said.push(class);
+        }
+    }
+}
+
 #[test]
 fn quadx_maneuvers_motor4_gain_fault() {
     // SOURCE.md: fault on at time_boot_ms 98604, off at 128625; motor 4, gamma 0.7.
@@ -130,6 +147,7 @@ fn quadx_maneuvers_motor4_gain_fault() {
     assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     // Cleared after removal.
     cleared_without_a_new_class(&c, off, "motor4");
+    no_class_returns(&c, "motor4");
 }
 
 #[test]
@@ -180,6 +198,7 @@ fn quad_plus_hover_motor1_gain_fault() {
         .fold(0.0, f64::max);
     assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     cleared_without_a_new_class(&c, off, "motor1");
+    no_class_returns(&c, "motor1");
 }
 
 /// Helicopter logs: no `--profile` (the heartbeat says helicopter, the default head is H3-120);
@@ -234,6 +253,9 @@ fn heli_hover_servo1_gain_fault() {
     assert!(c.decisions.iter().any(|d| d.event == Event::Cleared
         && d.t > off
         && d.actuator.as_deref() == Some("swash1")));
+    // Gain and offset both off: the class found for it stays (it read loss, bias, loss, bias
+    // from 120 s to 132 s).
+    no_class_returns(&c, "swash1");
 }
 
 #[test]
@@ -258,6 +280,7 @@ fn heli_maneuvers_servo3_gain_fault() {
     let worst = window.iter().map(|g| (g - 0.75).abs()).fold(0.0, f64::max);
     assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     cleared_without_a_new_class(&c, off, "swash3");
+    no_class_returns(&c, "swash3");
 }
 
 #[test]

@@ -276,6 +276,10 @@ struct ActuatorState {
     /// The motor whose excess the loss's decision named as the explanation it could not rule
     /// out (see `alternative`), and when that decision was made.
     alternative: Option<(usize, f64)>,
+    /// The change test has read the fault in force as a gain and an offset together, clearly
+    /// better than either alone: a later reading of one of them alone is not its class (see
+    /// `step_class_of`).
+    mixed_seen: bool,
 }
 
 impl ActuatorState {
@@ -286,6 +290,7 @@ impl ActuatorState {
         self.class_candidate = None;
         self.borrowed = 0;
         self.alternative = None;
+        self.mixed_seen = false;
     }
 }
 
@@ -495,6 +500,16 @@ impl Diagnoser {
         // A gain and an offset together fitting clearly better is no single kind (the SITL
         // servo faults scale the PWM about 1000 µs: about the 1500 µs trim, both).
         if mixed_vetoes && -r.margin_over(r.mixed_drop) >= DATA_MARGIN {
+            return None;
+        }
+        // Once the pair has fitted clearly better during the fault, a gain or an offset alone
+        // fitting best later is the stored stretch's luck, not a new class: in the SITL servo
+        // 1 hover the reading went pair, offset, pair, offset, and the class with it (loss,
+        // bias, loss, bias in 12 s).
+        if mixed_vetoes
+            && self.actuators[j].mixed_seen
+            && matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset)
+        {
             return None;
         }
         let p = &self.params;
@@ -917,6 +932,13 @@ impl Diagnoser {
         } else {
             None
         };
+        if let Some(r) = self.reading {
+            let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
+            let st = &mut self.actuators[r.actuator];
+            if st.active.is_some() && long && -r.margin_over(r.mixed_drop) >= DATA_MARGIN {
+                st.mixed_seen = true;
+            }
+        }
         let preferred = self.naming_reading().map(|r| r.actuator);
         let mut explained = [[[0.0; crate::model::MAX_ACTUATORS]; 2]; 3];
         let mut prior_decided = [None; 2];
