@@ -165,6 +165,31 @@ fn a_valid_file_runs_and_json_has_the_contract_keys() {
 }
 
 #[test]
+fn json_times_are_whole_steps_without_float_noise() {
+    // 50 Hz steps: a delay or settling time is a whole number of 20 ms steps, and the JSON
+    // says 0.26, not 0.2599999999999998 (the sum of the steps' dt).
+    let (code, out, err) = ahcmon(&["eval", "paper-fig5-gaussian", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let mut seen = 0;
+    for row in v.as_array().unwrap() {
+        for key in ["detection_delay_s", "settle_s"] {
+            if row[key].is_null() {
+                continue;
+            }
+            let text = row[key].to_string();
+            let decimals = text.split('.').nth(1).map_or(0, str::len);
+            assert!(decimals <= 2, "{key} {text} in {row}");
+            seen += 1;
+        }
+    }
+    assert!(
+        seen >= 5,
+        "every filter detects the fault in fig 5: {seen} times"
+    );
+}
+
+#[test]
 fn plot_writes_valid_svg() {
     let dir = common::temp_dir("cli_plot");
     let (code, _, err) = ahcmon(&[
