@@ -527,6 +527,17 @@ impl Diagnoser {
         }
     }
 
+    /// The change test reads actuator `j`'s change clearly as a gain or an offset (taken as
+    /// its class or not), not as a stuck output.
+    fn data_read_unstuck(&self, j: usize) -> bool {
+        self.reading.is_some_and(|r| {
+            r.actuator == j
+                && r.kind != ChangeKind::Stuck
+                && r.samples as f64 * self.dt >= CLASS_MIN_S
+                && r.margin_over(r.next_kind_drop) >= DATA_MARGIN
+        })
+    }
+
     /// The reading's actuator drifts: an offset growing linearly since the ramp's start fits
     /// clearly better than the step of the reading's kind and at least as well as a gain and
     /// an offset stepping together, and has grown beyond the bias tolerance over at least
@@ -1256,12 +1267,20 @@ impl Diagnoser {
                     let back = (e.gamma - 1.0).abs() < p.loe_tau
                         && self.actuators[j].channels[0].e.abs() < p.threshold
                         && !new_step;
-                    let mut c =
-                        if c == FaultClass::Unclassified || ukf_warming || still_stuck || back {
-                            prev
-                        } else {
-                            c
-                        };
+                    // The filters' stuck while the data clearly read another kind of step (a
+                    // class or not) is gamma swinging through zero as it converges: the SITL
+                    // servo 1 hover read stuck for 3 s, the data an offset (with a gain).
+                    let swinging = c == FaultClass::Stuck && self.data_read_unstuck(j);
+                    let mut c = if c == FaultClass::Unclassified
+                        || ukf_warming
+                        || still_stuck
+                        || back
+                        || swinging
+                    {
+                        prev
+                    } else {
+                        c
+                    };
                     if c != prev {
                         let st = &mut self.actuators[j];
                         let since = match st.class_candidate {
