@@ -222,6 +222,17 @@ pub struct VehiclePipeline {
     warned_missing_output: bool,
     /// Why the run failed (said when it happened; repeated in the summary).
     failure: Option<String>,
+    /// What the monitor knew when the vehicle last rebooted (for the summary: `last` and
+    /// the faults then in force belong to the boot before).
+    pub before_reboot: Option<BeforeReboot>,
+}
+
+/// The faults in force when the vehicle last rebooted after estimating.
+#[derive(Debug, Clone, Copy)]
+pub struct BeforeReboot {
+    pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
+    /// The filters have run since (`last` is the new boot's).
+    pub estimated_since: bool,
 }
 
 /// The calibrated profile's rate and noise levels: the process noise from what the model could
@@ -284,6 +295,7 @@ impl VehiclePipeline {
             active: [None; MAX_ACTUATORS],
             warned_missing_output: false,
             failure: None,
+            before_reboot: None,
         }
     }
 
@@ -424,6 +436,31 @@ impl VehiclePipeline {
             let d = Decision::monitor(t, self.sysid, Event::FilterReset, "vehicle rebooted");
             sink.decision(&d, &r.profile);
             self.counters.decisions += 1;
+            // A fault in force is not cleared by a reboot: say so, since the new boot's
+            // calibration may take it for the vehicle's normal.
+            let faulty: Vec<String> = r
+                .profile
+                .actuators
+                .iter()
+                .zip(&self.active)
+                .filter_map(|(a, c)| c.map(|c| format!("{} ({})", a.name, c.as_str())))
+                .collect();
+            if !faulty.is_empty() {
+                sink.message(
+                    self.sysid,
+                    &format!(
+                        "warning: the vehicle rebooted with faults in force: {}; they are not cleared, and the new boot's calibration may take them for normal",
+                        faulty.join(", ")
+                    ),
+                );
+            }
+        }
+        // (A boot that never estimated leaves the one before it as it was.)
+        if matches!(self.stage, Stage::Running(_)) {
+            self.before_reboot = Some(BeforeReboot {
+                active: self.active,
+                estimated_since: false,
+            });
         }
         self.stage = Stage::Grounded;
         self.armed_since = None;
@@ -775,6 +812,9 @@ impl VehiclePipeline {
                     self.active[j] = r.diag.active(j);
                 }
                 self.last = Some((s.t, r.est));
+                if let Some(b) = &mut self.before_reboot {
+                    b.estimated_since = true;
+                }
             }
         }
     }

@@ -1211,3 +1211,58 @@ fn outages_of_half_a_second_give_no_false_decisions() {
         assert_eq!(d["actuator"], "aileron", "{d}");
     }
 }
+
+/// A fault in force when the vehicle reboots is not cleared by it: the reboot is warned of, and
+/// while the new boot calibrates the summary's estimates and states are the old boot's, said so.
+#[test]
+fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
+    let dir = common::temp_dir("cli_reboot_fault");
+    let first = dir.join("first.tlog");
+    let (code, _, err) = ahcmon(&[
+        "sim",
+        "--scenario",
+        "quad-x-motor2-loe-live",
+        "--tlog",
+        first.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    // The second boot's first fifth (12 of 60 s): airborne, still calibrating.
+    let second = dir.join("second.tlog");
+    let (code, _, err) = ahcmon(&[
+        "sim",
+        "--scenario",
+        "quad-x-motor2-loe-live",
+        "--seed",
+        "2",
+        "--tlog",
+        second.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let second = std::fs::read(&second).unwrap();
+    let records = tlog_records(&second);
+    let cut = records[records.len() / 5].0.start;
+    let mut log = std::fs::read(&first).unwrap();
+    log.extend_from_slice(&second[..cut]);
+    let both = dir.join("both.tlog");
+    std::fs::write(&both, log).unwrap();
+    let (code, out, err) = ahcmon(&["replay", both.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    let all = format!("{out}{err}");
+    assert!(all.contains("filter_reset  (vehicle rebooted)"), "{all}");
+    assert!(
+        all.contains("rebooted with faults in force: motor2 (loss_of_effectiveness)"),
+        "{all}"
+    );
+    assert!(
+        all.contains("(before the vehicle rebooted; not estimated since)"),
+        "{all}"
+    );
+    let motor2 = all
+        .lines()
+        .find(|l| l.trim_start().starts_with("motor2"))
+        .unwrap_or_else(|| panic!("{all}"));
+    assert!(
+        motor2.ends_with("loss_of_effectiveness at the reboot, not judged since"),
+        "{motor2}"
+    );
+}

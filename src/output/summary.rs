@@ -91,7 +91,18 @@ pub fn render(
         let (Some(profile), Some((t, est))) = (p.profile(), &p.last) else {
             continue;
         };
-        let _ = writeln!(s, "  final estimates at t={t:.2} s:");
+        // After a reboot the filters start over: until they run again, the estimates shown
+        // and the faults then in force are the boot before's (on its clock).
+        let old_boot = p.before_reboot.filter(|b| !b.estimated_since);
+        let _ = writeln!(
+            s,
+            "  final estimates at t={t:.2} s{}:",
+            if old_boot.is_some() {
+                " (before the vehicle rebooted; not estimated since)"
+            } else {
+                ""
+            }
+        );
         let _ = writeln!(
             s,
             "    {:<10} {:>3}  {:<8} {:>24} {:>27}  {:>17}  {:>9}  state",
@@ -122,9 +133,17 @@ pub fn render(
                 })
                 .filter(|d| d.event == Event::Cleared)
                 .map(|d| format!("cleared at t={:.2} s", d.t));
-            let state = match p.active[j] {
-                Some(c) => c.as_str().to_string(),
-                None => cleared.unwrap_or_else(|| "healthy".into()),
+            // A fault in force at a reboot is not cleared by it.
+            let at_reboot = p.before_reboot.and_then(|b| b.active[j]);
+            let state = match (p.active[j], at_reboot, old_boot) {
+                (Some(c), _, _) => c.as_str().to_string(),
+                (None, Some(c), Some(_)) => {
+                    format!("{} at the reboot, not judged since", c.as_str())
+                }
+                (None, Some(c), None) => {
+                    format!("healthy since the reboot ({} before)", c.as_str())
+                }
+                (None, None, _) => cleared.unwrap_or_else(|| "healthy".into()),
             };
             for (f, name) in FILTER_NAMES.iter().enumerate() {
                 let e = est[f][j];
