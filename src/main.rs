@@ -140,9 +140,9 @@ enum Command {
     /// station): both filters and the diagnosis per vehicle, decisions as they happen, a summary
     /// on exit (ctrl-c).
     Monitor {
-        /// udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT,
-        /// tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: and tcp: are udpin: and tcpout:, as in
-        /// MAVProxy).
+        /// udpin:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: and
+        /// tcp: are udpin: and tcpout:, as in MAVProxy). Not udpout or udpbcast: the monitor
+        /// sends nothing to the vehicle, so a UDP peer would never learn where to send.
         conn: String,
         #[command(flatten)]
         run: RunArgs,
@@ -798,6 +798,15 @@ fn monitor(
     } = o;
     let alerts = alerts.as_deref();
     let spec: ConnSpec = conn.parse()?;
+    // A UDP peer sends to addresses it has heard from, and the monitor says nothing on the
+    // vehicle link: from udpout or udpbcast it would wait forever.
+    if let ConnSpec::UdpOut(a) | ConnSpec::UdpBcast(a) = &spec {
+        let port = a.port();
+        return Err(UsageError(format!(
+            "monitor {spec}: the monitor sends nothing to the vehicle, so a UDP peer would never learn where to send; have the autopilot or router send to this machine and listen with udpin:0.0.0.0:{port} (MAVProxy: --out=udp:THIS_HOST:{port})"
+        ))
+        .into());
+    }
     // The dashboard unless asked not to, or when stdout is not a terminal (CI, pipes).
     let dashboard = !headless && std::io::stdout().is_terminal();
     let alerts: Option<ConnSpec> = alerts.map(str::parse).transpose()?;

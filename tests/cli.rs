@@ -109,6 +109,15 @@ fn bad_arguments_exit_2() {
     );
     // A connection string without its address, a baud rate of 0.
     assert_one_line_error(&["monitor", "udpin"], &["`udpin` needs an address"]);
+    // A UDP peer only answers an address it has heard from; the monitor sends nothing.
+    assert_one_line_error(
+        &["monitor", "udpout:127.0.0.1:14550"],
+        &["sends nothing", "udpin:0.0.0.0:14550"],
+    );
+    assert_one_line_error(
+        &["monitor", "udpbcast:127.255.255.255:14550"],
+        &["sends nothing"],
+    );
     assert_one_line_error(&["monitor", "serial:/dev/ttyS0:0"], &["baud rate 0"]);
     // A device that cannot be opened is named (it said only "No such file or directory").
     let (code, _, err) = ahcmon(&["monitor", "serial:/dev/ahcmon-no-such-tty:57600"]);
