@@ -861,10 +861,12 @@ fn monitor(
             .as_ref()
             .map(|d| ahcmon::link::simulate::script_on_vehicle_clock(&d.named.scenario));
         // demo: the simulated vehicle flies in this process, over loopback UDP to the monitor.
+        let flight_over = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let sim = match (demo, local) {
             (Some(d), Some(addr)) => {
                 let target: ConnSpec = format!("udpout:127.0.0.1:{}", addr.port()).parse()?;
                 let mut out = Link::open(target).await?;
+                let over = flight_over.clone();
                 Some(tokio::spawn(async move {
                     let opts = ahcmon::link::simulate::FlyOptions {
                         sysid: 1,
@@ -873,7 +875,11 @@ fn monitor(
                         speed: Some(d.speed),
                         epoch_us: now_us(),
                     };
-                    ahcmon::link::simulate::fly(&d.named, &opts, Some(&mut out), None, None).await
+                    let flown =
+                        ahcmon::link::simulate::fly(&d.named, &opts, Some(&mut out), None, None)
+                            .await;
+                    over.store(true, std::sync::atomic::Ordering::Relaxed);
+                    flown
                 }))
             }
             _ => None,
@@ -890,6 +896,7 @@ fn monitor(
                 .context("cannot start the dashboard (try --headless)")?;
             if let Some(script) = script {
                 ui.set_note(format!("script: {script}"));
+                ui.end_when(flight_over.clone(), "END OF FLIGHT");
             }
             Some(ui)
         } else {
@@ -1123,7 +1130,13 @@ fn replay(
                 quit = true;
                 break;
             }
-            let _ = ui.draw(&monitor, &files.seen, reader.counters, Some(0.0), false);
+            let _ = ui.draw(
+                &monitor,
+                &files.seen,
+                reader.counters,
+                Some(0.0),
+                &Default::default(),
+            );
         }
         if let Some(x) = speed {
             let (t0, at) = *pace.get_or_insert((ts, std::time::Instant::now()));
@@ -1154,12 +1167,18 @@ fn replay(
     if let Some(ui) = ui.as_mut()
         && !quit
     {
-        ui.mark_ended();
+        ui.mark_ended("END OF LOG");
         loop {
             if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(&monitor) {
                 break;
             }
-            let _ = ui.draw(&monitor, &files.seen, reader.counters, None, true);
+            let _ = ui.draw(
+                &monitor,
+                &files.seen,
+                reader.counters,
+                None,
+                &Default::default(),
+            );
             std::thread::sleep(std::time::Duration::from_millis(100));
         }
     }

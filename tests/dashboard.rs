@@ -181,3 +181,32 @@ fn a_link_that_never_spoke_is_not_called_lost() {
     assert!(footer.contains("NO DATA YET"), "{footer}");
     assert!(!footer.contains("LINK LOST"), "{footer}");
 }
+
+/// The footer speaks of the selected vehicle's link: with sysid 1 selected and live, another
+/// vehicle's lost link is named beside "link ok" (it read LINK LOST for every vehicle).
+#[test]
+fn the_footer_says_the_selected_vehicles_link_and_names_others_lost() {
+    let (m, d, hist) = state_at(45.0);
+    let ui = UiState::default();
+    let footer = |vehicles: &ahcmon::output::dashboard::VehicleLinks| {
+        let mut link = LinkInfo {
+            name: "udpin:127.0.0.1:14550".into(),
+            ..Default::default()
+        };
+        link.set_vehicles(&m, &ui, Some(0.0), vehicles);
+        let mut term = Terminal::new(TestBackend::new(140, 30)).unwrap();
+        term.draw(|f| render(f, &m, &d, &hist, &ui, &link)).unwrap();
+        let buf = term.backend().buffer().clone();
+        (0..140)
+            .map(|x| buf[(x, 29)].symbol().to_string())
+            .collect::<String>()
+    };
+    let s = footer(&[(1, (0.02, false)), (2, (7.5, true))].into());
+    assert!(s.contains("link ok"), "{s}");
+    assert!(s.contains("link lost: sysid 2"), "{s}");
+    assert!(s.contains("age 0.0 s"), "{s}");
+    let s = footer(&[(1, (3.25, true)), (2, (0.02, false))].into());
+    assert!(s.contains("LINK LOST"), "{s}");
+    assert!(!s.contains("link lost: sysid"), "{s}");
+    assert!(s.contains("age 3.2 s") || s.contains("age 3.3 s"), "{s}");
+}

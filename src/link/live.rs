@@ -172,8 +172,14 @@ pub async fn run(
                     }
                     let counters = live_counters.lock().map(|c| c.link).unwrap_or_default();
                     let age = any_frame.map(|t| now.duration_since(t).as_secs_f64());
-                    let lost_any = lost.values().any(|l| *l) || any_frame.is_none();
-                    let _ = ui.draw(monitor, &sink.seen, counters, age, lost_any);
+                    let vehicles: crate::output::dashboard::VehicleLinks = last_seen
+                        .iter()
+                        .map(|(s, seen)| {
+                            let age = now.duration_since(*seen).as_secs_f64();
+                            (*s, (age, lost.get(s) == Some(&true)))
+                        })
+                        .collect();
+                    let _ = ui.draw(monitor, &sink.seen, counters, age, &vehicles);
                 }
             }
             _ = &mut ctrl_c => break,

@@ -40,9 +40,52 @@ pub struct LinkInfo {
     pub rate_hz: f64,
     /// Seconds since the last frame; `None` before the first.
     pub data_age_s: Option<f64>,
-    /// A replayed log has ended (the dashboard stays until q).
-    pub ended: bool,
+    /// The stream has ended, and what the footer says instead of a link state ("END OF LOG"
+    /// for a replay, "END OF FLIGHT" for the demo); the dashboard stays until q.
+    pub ended: Option<&'static str>,
+    /// The selected vehicle's link is lost (or, with no vehicle selected, some vehicle's).
     pub lost: bool,
+    /// Other vehicles whose links are lost.
+    pub others_lost: Vec<u8>,
+}
+
+impl LinkInfo {
+    /// The footer speaks of the selected vehicle's link (its age, lost or not); other vehicles
+    /// whose links are lost are named. `last_frame_age_s`: since any frame (`None` before the
+    /// first).
+    pub fn set_vehicles(
+        &mut self,
+        monitor: &Monitor,
+        ui: &UiState,
+        last_frame_age_s: Option<f64>,
+        vehicles: &VehicleLinks,
+    ) {
+        let selected = selected_sysid(monitor, ui);
+        let (age, lost) = match selected.and_then(|s| vehicles.get(&s)) {
+            Some(&(age, lost)) => (Some(age), lost),
+            None => (last_frame_age_s, vehicles.values().any(|v| v.1)),
+        };
+        self.data_age_s = last_frame_age_s.and(age);
+        self.lost = lost;
+        self.others_lost = vehicles
+            .iter()
+            .filter(|(s, v)| v.1 && Some(**s) != selected)
+            .map(|(s, _)| *s)
+            .collect();
+    }
+}
+
+/// Per vehicle (sysid): seconds since its last frame, and whether its link is lost.
+pub type VehicleLinks = BTreeMap<u8, (f64, bool)>;
+
+/// The vehicle the operator selected (Tab), of those with a pipeline.
+fn selected_sysid(monitor: &Monitor, ui: &UiState) -> Option<u8> {
+    let n = monitor.pipelines.len();
+    monitor
+        .pipelines
+        .keys()
+        .nth(ui.vehicle.min(n.saturating_sub(1)))
+        .copied()
 }
 
 /// Time-stamped estimates of both filters for one actuator.
@@ -133,9 +176,7 @@ pub fn render(
 ) {
     let area = f.area();
     let sysids: Vec<u8> = monitor.pipelines.keys().copied().collect();
-    let sysid = sysids
-        .get(ui.vehicle.min(sysids.len().saturating_sub(1)))
-        .copied();
+    let sysid = selected_sysid(monitor, ui);
     let rows = Layout::default()
         .direction(Direction::Vertical)
         .constraints([
@@ -443,9 +484,9 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
 
 /// `lost`: the vehicles' frames their sequence numbers say never arrived.
 fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, lost: u64, ui: &UiState) {
-    let state = if link.ended {
+    let state = if let Some(end) = link.ended {
         Span::styled(
-            " END OF LOG ",
+            format!(" {end} "),
             Style::default().fg(Color::Black).bg(Color::Gray),
         )
     } else if link.data_age_s.is_none() {
@@ -469,8 +510,14 @@ fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, lost: u64, ui: &UiState) {
     let age = link
         .data_age_s
         .map_or("-".to_string(), |a| format!("{a:.1} s"));
+    let others = if link.others_lost.is_empty() {
+        String::new()
+    } else {
+        let ids: Vec<String> = link.others_lost.iter().map(u8::to_string).collect();
+        format!(" · link lost: sysid {}", ids.join(", "))
+    };
     let text = format!(
-        " {} · {:.0} msg/s · age {age} · lost {lost} · bad crc {} resync {} unknown {} · {}",
+        " {}{others} · {:.0} msg/s · age {age} · lost {lost} · bad crc {} resync {} unknown {} · {}",
         link.name,
         link.rate_hz,
         c.bad_crc,
@@ -522,6 +569,11 @@ pub struct TerminalUi {
     pub ui: UiState,
     pub link: LinkInfo,
     frames_window: VecDeque<(std::time::Instant, u64)>,
+    /// Set by whoever feeds the stream when it is over (the demo's flight): then the footer
+    /// says `ends_as`.
+    ends_when: Option<(std::sync::Arc<std::sync::atomic::AtomicBool>, &'static str)>,
+    /// The paused screen has been drawn (with its PAUSED mark).
+    pause_drawn: bool,
 }
 
 fn restore_terminal() {
@@ -561,12 +613,23 @@ impl TerminalUi {
                 ..Default::default()
             },
             frames_window: VecDeque::new(),
+            ends_when: None,
+            pause_drawn: false,
         })
     }
 
-    /// The replayed log has ended: the footer says so instead of a link state.
-    pub fn mark_ended(&mut self) {
-        self.link.ended = true;
+    /// The stream has ended: the footer says `label` ("END OF LOG") instead of a link state.
+    pub fn mark_ended(&mut self, label: &'static str) {
+        self.link.ended = Some(label);
+    }
+
+    /// Mark the stream ended as `label` once `flag` is set (by a task feeding it).
+    pub fn end_when(
+        &mut self,
+        flag: std::sync::Arc<std::sync::atomic::AtomicBool>,
+        label: &'static str,
+    ) {
+        self.ends_when = Some((flag, label));
     }
 
     /// Show `note` in the header (see [`UiState::note`]).
@@ -597,7 +660,10 @@ impl TerminalUi {
                 KeyCode::Char('c') if k.modifiers.contains(KeyModifiers::CONTROL) => {
                     return KeyAction::Quit;
                 }
-                KeyCode::Char('p') => self.ui.paused = !self.ui.paused,
+                KeyCode::Char('p') => {
+                    self.ui.paused = !self.ui.paused;
+                    self.pause_drawn = false;
+                }
                 KeyCode::Char('f') => self.ui.frozen = !self.ui.frozen,
                 KeyCode::Char('?') => self.ui.help = !self.ui.help,
                 KeyCode::Esc => self.ui.help = false,
@@ -622,14 +688,15 @@ impl TerminalUi {
         KeyAction::None
     }
 
-    /// Redraw from the current state (called at a fixed rate).
+    /// Redraw from the current state (called at a fixed rate). `last_frame_age_s`: since any
+    /// frame (`None` before the first); `vehicles`: each vehicle's link.
     pub fn draw(
         &mut self,
         monitor: &Monitor,
         decisions: &[Decision],
         counters: FrameCounters,
         last_frame_age_s: Option<f64>,
-        lost: bool,
+        vehicles: &VehicleLinks,
     ) -> std::io::Result<()> {
         let now = std::time::Instant::now();
         self.frames_window.push_back((now, counters.frames));
@@ -647,12 +714,19 @@ impl TerminalUi {
             }
         }
         self.link.counters = counters;
-        self.link.data_age_s = last_frame_age_s;
-        self.link.lost = lost;
-        if self.ui.paused {
+        self.link
+            .set_vehicles(monitor, &self.ui, last_frame_age_s, vehicles);
+        if let Some((flag, label)) = &self.ends_when
+            && flag.load(std::sync::atomic::Ordering::Relaxed)
+        {
+            self.link.ended = Some(label);
+        }
+        // Paused: the screen stands, once drawn with its PAUSED mark.
+        if self.ui.paused && self.pause_drawn {
             return Ok(());
         }
-        if !self.ui.frozen {
+        self.pause_drawn = self.ui.paused;
+        if !self.ui.frozen && !self.ui.paused {
             self.history.sample(monitor);
         }
         let (history, ui, link) = (&self.history, &self.ui, &self.link);
