@@ -173,6 +173,11 @@ pub struct Decision {
     pub gamma_bounds: Option<[f64; 2]>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delta_bounds: Option<[f64; 2]>,
+    /// How far the actuator's effective output (`gamma u + delta`) is off at the operating
+    /// point, as the measurements attribute it (the MIT-UKF's; the estimates' `deviation`):
+    /// the size of a bias, whatever the filter's split of it into gain and offset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deviation: Option<f64>,
     /// Which filters agree.
     pub filters: Vec<&'static str>,
     pub confidence: f64,
@@ -197,6 +202,7 @@ impl Decision {
             delta: None,
             gamma_bounds: None,
             delta_bounds: None,
+            deviation: None,
             filters: vec![],
             confidence: 0.0,
             also: vec![],
@@ -1478,6 +1484,7 @@ impl Diagnoser {
             delta: Some(e.delta),
             gamma_bounds: Some([e.gamma_lo, e.gamma_hi]),
             delta_bounds: Some([e.delta_lo, e.delta_hi]),
+            deviation: Some(st.channels[0].e),
             filters,
             confidence,
             also: vec![],

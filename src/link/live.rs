@@ -128,6 +128,12 @@ pub async fn run(
                     }
                 }
                 monitor.on_frame(&frame, sink);
+                // The alerts speak as a vehicle's system id from when the vehicle is known.
+                if let Some(a) = sink.alerts.as_mut()
+                    && monitor.assembler.vehicles.contains_key(&frame.sysid)
+                {
+                    a.see(frame.sysid);
+                }
                 send_alerts(sink, alerts.as_mut(), clock).await;
             }
             _ = tick.tick() => {

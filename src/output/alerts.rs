@@ -61,6 +61,8 @@ pub struct Alerts {
     text_queue: BTreeMap<u8, VecDeque<QueuedText>>,
     last_text: BTreeMap<u8, f64>,
     latest: BTreeMap<(u8, String), Latest>,
+    /// Per actuator its NAMED_VALUE_FLOAT names (see [`value_names`]).
+    value_names: BTreeMap<(u8, String), [String; 2]>,
     state: BTreeMap<(u8, String), AhcState>,
     last_values: f64,
     /// The last text queued about each actuator (an actuator's newest is never dropped from
@@ -106,9 +108,11 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
                     format!("LOE {:.0}%", (1.0 - d.gamma.unwrap_or(1.0)) * 100.0),
                 ),
                 Some(FaultClass::Stuck) => (MavSeverity::MAV_SEVERITY_CRITICAL, "stuck".into()),
+                // The output's offset at the operating point: the filter's delta alone can be
+                // ~0 with the change in its gain (hexa motor 5 stuck read "bias -0.00").
                 Some(FaultClass::Bias) => (
                     MavSeverity::MAV_SEVERITY_ERROR,
-                    format!("bias {:+.2}", d.delta.unwrap_or(0.0)),
+                    format!("bias {:+.2}", d.deviation.or(d.delta).unwrap_or(0.0)),
                 ),
                 Some(FaultClass::Drift) => (MavSeverity::MAV_SEVERITY_WARNING, "drift".into()),
                 Some(FaultClass::Unclassified) | None => {
@@ -139,6 +143,28 @@ fn short_name(prefix: &str, name: &str) -> String {
     cut_bytes(&format!("{prefix}_{name}"), 10).to_string()
 }
 
+/// Each actuator's NAMED_VALUE_FLOAT names, `[gamma, delta]`: [`short_name`], or where two of a
+/// vehicle's cut names would be the same (`esc_motor_1`, `esc_motor_2`), `g_ch<channel>`.
+fn value_names(profile: &Profile) -> Vec<[String; 2]> {
+    let cut: Vec<String> = profile
+        .actuators
+        .iter()
+        .map(|a| short_name("g", &a.name))
+        .collect();
+    profile
+        .actuators
+        .iter()
+        .zip(&cut)
+        .map(|(a, c)| {
+            if cut.iter().filter(|other| *other == c).count() == 1 {
+                [short_name("g", &a.name), short_name("d", &a.name)]
+            } else {
+                [format!("g_ch{}", a.channel), format!("d_ch{}", a.channel)]
+            }
+        })
+        .collect()
+}
+
 fn state_of(d: &Decision) -> Option<AhcState> {
     Some(match d.event {
         Event::Cleared => AhcState::AHC_STATE_HEALTHY,
@@ -161,9 +187,12 @@ impl Alerts {
         self.outbox.push(frame);
     }
 
-    fn see(&mut self, sysid: u8) {
+    /// A vehicle is known (its heartbeat or telemetry heard): the heartbeat speaks as it.
+    pub fn see(&mut self, sysid: u8) {
         if !self.vehicles.contains(&sysid) {
             self.vehicles.push(sysid);
+            // Announce it at the next tick.
+            self.next_heartbeat = self.now;
         }
     }
 
@@ -229,6 +258,15 @@ impl Alerts {
         profile: &Profile,
     ) {
         self.see(sysid);
+        if profile
+            .actuators
+            .iter()
+            .any(|a| !self.value_names.contains_key(&(sysid, a.name.clone())))
+        {
+            for (a, names) in profile.actuators.iter().zip(value_names(profile)) {
+                self.value_names.insert((sysid, a.name.clone()), names);
+            }
+        }
         for (j, a) in profile.actuators.iter().enumerate() {
             self.latest.insert(
                 (sysid, a.name.clone()),
@@ -276,13 +314,9 @@ impl Alerts {
         self.now = now;
         if now >= self.next_heartbeat {
             self.next_heartbeat = now + 1.0;
-            // Before any vehicle is seen, announce ourselves as system 1 (ArduPilot's default).
-            let ids = if self.vehicles.is_empty() {
-                vec![1]
-            } else {
-                self.vehicles.clone()
-            };
-            for sysid in ids {
+            // As each vehicle's system id; before any is known, nothing (a component of a
+            // system 1 that may not be there, or be another vehicle).
+            for sysid in self.vehicles.clone() {
                 let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
                     custom_mode: 0,
                     mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
@@ -301,11 +335,16 @@ impl Alerts {
                 self.latest.iter().map(|(k, v)| (k.clone(), *v)).collect();
             for ((sysid, name), l) in latest {
                 let time_boot_ms = (l.t * 1e3).max(0.0) as u32;
-                for (prefix, value) in [("g", l.ukf.gamma), ("d", l.ukf.delta)] {
+                let names = self
+                    .value_names
+                    .get(&(sysid, name.clone()))
+                    .cloned()
+                    .unwrap_or_else(|| [short_name("g", &name), short_name("d", &name)]);
+                for (value_name, value) in names.iter().zip([l.ukf.gamma, l.ukf.delta]) {
                     let msg = MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
                         time_boot_ms,
                         value: value as f32,
-                        name: short_name(prefix, &name).as_str().into(),
+                        name: value_name.as_str().into(),
                     });
                     self.push(sysid, &msg);
                 }
@@ -368,6 +407,44 @@ mod tests {
         );
         assert_eq!(short_name("g", "servo1_ä"), "g_servo1_");
         assert_eq!(short_name("g", "motor1"), "g_motor1");
+        // A bias's size is the output's offset at the operating point, whatever the filter's
+        // split (gain 1.25 with delta -0.001 on a hovering motor read "bias -0.00").
+        d.actuator = Some("motor5".into());
+        d.class = Some(FaultClass::Bias);
+        d.gamma = Some(1.25);
+        d.delta = Some(-0.001);
+        d.deviation = Some(0.121);
+        let (sev, text) = statustext(&d).unwrap();
+        assert_eq!(text, "AHC motor5 bias +0.12 UKF+ESMF");
+        assert_eq!(sev, MavSeverity::MAV_SEVERITY_ERROR);
+    }
+
+    #[test]
+    fn value_names_are_unique_within_a_vehicle() {
+        use crate::link::frame::{Parsed, parse};
+        // `esc_motor_1`..`_4` all cut to `g_esc_moto`: those take their channel instead.
+        let mut p = Profile::resolve("quad-x").unwrap();
+        for (j, a) in p.actuators.iter_mut().enumerate() {
+            a.name = format!("esc_motor_{}", j + 1);
+        }
+        p.actuators[3].name = "tail".into();
+        let names = value_names(&p);
+        assert_eq!(names[0], ["g_ch1", "d_ch1"]);
+        assert_eq!(names[2], ["g_ch3", "d_ch3"]);
+        assert_eq!(names[3], ["g_tail", "d_tail"]);
+        let mut a = Alerts::default();
+        let est = [AhcEstimate::default(); 4];
+        a.on_estimates(1.0, 1, &[&est, &est], &p);
+        a.tick(1.0);
+        let mut sent = std::collections::BTreeSet::new();
+        for frame in &a.outbox {
+            if let Parsed::Frame(f, _) = parse(frame)
+                && let MavMessage::NAMED_VALUE_FLOAT(m) = f.msg
+            {
+                sent.insert(m.name.to_str().unwrap().trim_end_matches('\0').to_string());
+            }
+        }
+        assert_eq!(sent.len(), 8, "{sent:?}");
     }
 
     /// A decision about `actuator` of vehicle 1, as the diagnosis makes them.
@@ -552,6 +629,12 @@ mod tests {
     fn texts_are_rate_limited_and_queued() {
         let mut a = Alerts::default();
         a.tick(0.0);
+        assert!(
+            a.outbox.is_empty(),
+            "no heartbeat before a vehicle is known"
+        );
+        a.see(1);
+        a.tick(1.0);
         let hb = a.outbox.len();
         assert_eq!(hb, 1, "one heartbeat");
         for motor in ["motor1", "motor2", "motor3"] {
@@ -560,9 +643,9 @@ mod tests {
             a.on_decision(&d);
         }
         assert_eq!(a.texts_sent, 1);
-        a.tick(0.5);
+        a.tick(1.5);
         assert_eq!(a.texts_sent, 1);
-        a.tick(1.1);
+        a.tick(2.1);
         assert_eq!(a.texts_sent, 2);
     }
 
