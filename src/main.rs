@@ -717,6 +717,18 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
             Some(s) => Some(Link::open(s.clone()).await?),
             None => None,
         };
+        // Where frames go before a peer is there (they are counted as not sent).
+        if let (Some(s), Some(l)) = (&spec, &link) {
+            let waiting = match (s, l.not_connected()) {
+                (_, Some(why)) => Some(format!("{why}; retrying every second")),
+                (ConnSpec::UdpIn(_), _) => Some("no peer until a datagram arrives".into()),
+                (ConnSpec::TcpIn(_), _) => Some("no client connected yet".into()),
+                _ => None,
+            };
+            if let Some(w) = waiting {
+                eprintln!("sim: {s}: {w}; frames are not sent until then");
+            }
+        }
         let flight = fly(named, &opts, link.as_mut(), tlog.as_mut(), truth.as_mut());
         // ctrl-c ends the flight with the files whole (the default would kill the process with
         // the tlog's last records still buffered).

@@ -168,6 +168,15 @@ async fn write_or_drop(stream: &mut Option<TcpStream>, frame: &[u8]) -> bool {
     }
 }
 
+/// What [`Link::recv_or_note`] brings.
+// Nearly every one is a frame, moved on at once: boxing it would allocate per frame.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+pub enum Received {
+    Frame(Frame),
+    Note(String),
+}
+
 /// One live connection: receive frames, send encoded frames.
 pub struct Link {
     pub spec: ConnSpec,
@@ -176,6 +185,8 @@ pub struct Link {
     buf: Vec<u8>,
     /// Times an outgoing TCP connection was re-established.
     pub reconnects: u64,
+    /// What happened to a TCP connection since last asked (connected, lost), for the user.
+    notes: std::collections::VecDeque<String>,
 }
 
 impl Link {
@@ -249,6 +260,7 @@ impl Link {
             framer: StreamFramer::default(),
             buf: vec![0; 65536],
             reconnects: 0,
+            notes: Default::default(),
         })
     }
 
@@ -282,8 +294,21 @@ impl Link {
     /// I/O errors of outgoing TCP are absorbed by reconnecting (every second).
     pub async fn recv(&mut self) -> Result<Frame, ConnError> {
         loop {
-            if let Some(f) = self.framer.next_frame() {
+            if let Received::Frame(f) = self.recv_or_note().await? {
                 return Ok(f);
+            }
+        }
+    }
+
+    /// Next frame, or a change of a TCP connection's state as it happens ("connected to
+    /// 127.0.0.1:5760", "connection to ... lost; reconnecting every second").
+    pub async fn recv_or_note(&mut self) -> Result<Received, ConnError> {
+        loop {
+            if let Some(note) = self.notes.pop_front() {
+                return Ok(Received::Note(note));
+            }
+            if let Some(f) = self.framer.next_frame() {
+                return Ok(Received::Frame(f));
             }
             let io = |spec: &ConnSpec, source| ConnError::Io {
                 spec: spec.to_string(),
@@ -305,7 +330,7 @@ impl Link {
                         self.framer.push(&self.buf[..n]);
                         // Parse this datagram completely before the next one.
                         if let Some(f) = self.framer.next_frame() {
-                            return Ok(f);
+                            return Ok(Received::Frame(f));
                         }
                         self.framer.end_datagram();
                     }
@@ -315,14 +340,18 @@ impl Link {
                 },
                 Transport::TcpIn { listener, stream } => match stream {
                     None => {
-                        let (s, _) = listener.accept().await.map_err(|e| io(&self.spec, e))?;
+                        let (s, from) = listener.accept().await.map_err(|e| io(&self.spec, e))?;
                         *stream = Some(s);
+                        self.notes
+                            .push_back(format!("a client connected from {from}"));
                     }
                     Some(s) => match s.read(&mut self.buf).await {
                         // A partial frame of the lost connection cannot complete either.
                         Ok(0) | Err(_) => {
                             *stream = None;
                             self.framer.end_datagram();
+                            self.notes
+                                .push_back("the client disconnected; waiting for another".into());
                         }
                         Ok(n) => self.framer.push(&self.buf[..n]),
                     },
@@ -333,6 +362,7 @@ impl Link {
                         if let Ok(s) = TcpStream::connect(*addr).await {
                             *stream = Some(s);
                             self.reconnects += 1;
+                            self.notes.push_back(format!("connected to {addr}"));
                         }
                     }
                     Some(s) => match s.read(&mut self.buf).await {
@@ -340,6 +370,9 @@ impl Link {
                         Ok(0) | Err(_) => {
                             *stream = None;
                             self.framer.end_datagram();
+                            self.notes.push_back(format!(
+                                "connection to {addr} lost; reconnecting every second"
+                            ));
                         }
                         Ok(n) => self.framer.push(&self.buf[..n]),
                     },
@@ -457,6 +490,30 @@ mod tests {
             "serial:/dev/ttyUSB0:57600".parse::<ConnSpec>().unwrap(),
             ConnSpec::Serial("/dev/ttyUSB0".into(), 57600)
         );
+    }
+
+    #[test]
+    fn a_tcp_connection_lost_and_made_again_is_told_as_it_happens() {
+        runtime().block_on(async {
+            let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+            let addr = listener.local_addr().expect("addr");
+            let spec: ConnSpec = format!("tcpout:{addr}").parse().expect("spec");
+            let mut link = Link::open(spec).await.expect("connects");
+            let (peer, _) = listener.accept().await.expect("accept");
+            drop(peer);
+            async fn next(link: &mut Link) -> String {
+                match tokio::time::timeout(Duration::from_secs(5), link.recv_or_note()).await {
+                    Ok(Ok(Received::Note(n))) => n,
+                    other => panic!("{other:?}"),
+                }
+            }
+            // Told before any frame comes (it reconnects within a second, the next note).
+            let lost = next(&mut link).await;
+            assert!(lost.contains("lost; reconnecting"), "{lost}");
+            let again = next(&mut link).await;
+            assert_eq!(again, format!("connected to {addr}"));
+            assert_eq!(link.reconnects, 1);
+        });
     }
 
     #[test]

@@ -66,6 +66,9 @@ pub async fn run(
         tokio::sync::oneshot::channel::<Result<LiveCounters, super::ConnError>>();
     // Frames for the vehicle link (only SET_MESSAGE_INTERVAL, only with --request-rates).
     let (vehicle_tx, mut vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
+    // Headless, the connection's state changes are said (the dashboard's footer shows the link).
+    let say_notes = ui.is_none();
+    let spec = link.spec.to_string();
     let reader = tokio::spawn(async move {
         let mut drops = 0u64;
         let result = loop {
@@ -75,8 +78,13 @@ pub async fn run(
                         break Err(e);
                     }
                 }
-                r = link.recv() => match r {
-                    Ok(frame) => {
+                r = link.recv_or_note() => match r {
+                    Ok(super::conn::Received::Note(note)) => {
+                        if say_notes {
+                            eprintln!("monitor: {spec}: {note}");
+                        }
+                    }
+                    Ok(super::conn::Received::Frame(frame)) => {
                         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                             drops += 1;
                         }
