@@ -160,7 +160,7 @@ enum Command {
         link_timeout: f64,
         /// Exit after this long (s) without any frame, once frames have arrived (e.g. at the
         /// end of a simulated flight).
-        #[arg(long, value_name = "S")]
+        #[arg(long, value_name = "S", allow_negative_numbers = true)]
         exit_idle: Option<f64>,
         /// Send alerts to a mission planner on this connection (usually
         /// udpout:127.0.0.1:14551 into a MAVProxy master): HEARTBEAT, STATUSTEXT per decision,
@@ -170,7 +170,7 @@ enum Command {
         /// Ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU at this rate
         /// (SET_MESSAGE_INTERVAL; reports COMMAND_ACK and the rates achieved). Off by
         /// default: without it nothing is ever sent to the vehicle.
-        #[arg(long, value_name = "HZ")]
+        #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
         request_rates: Option<f64>,
     },
     /// The built-in demonstration: a simulated H3-120 helicopter flies in this process over

@@ -95,6 +95,12 @@ fn bad_arguments_exit_2() {
         &["replay", "does/not/matter.tlog", "--speed", "-1"],
         &["--speed -1", "between"],
     );
+    for flag in ["--exit-idle", "--request-rates", "--link-timeout"] {
+        assert_one_line_error(
+            &["monitor", "udpin:127.0.0.1:0", flag, "-1"],
+            &[&format!("{flag} -1"), "between"],
+        );
+    }
     // --plot names a directory.
     let file = common::temp_dir("cli_plot_file").join("not-a-dir");
     std::fs::write(&file, "").unwrap();

@@ -7,6 +7,17 @@
 pub mod change;
 pub mod vehicle;
 
+/// A time to the microsecond: stamps in milliseconds times 1e-3, and sums of steps, carry float
+/// noise (49.980000000000004) that the JSON would show.
+pub fn whole_us(t: f64) -> f64 {
+    (t * 1e6).round() / 1e6
+}
+
+/// Serialise a time (s) as [`whole_us`] does.
+pub fn serialize_time<S: serde::Serializer>(t: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(whole_us(*t))
+}
+
 /// A decision event of the bounds rule.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BoundsEvent {

@@ -156,6 +156,7 @@ impl Event {
 /// One decision, as written to the decisions JSONL (DESIGN.md "Files").
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Decision {
+    #[serde(serialize_with = "super::serialize_time")]
     pub t: f64,
     pub sysid: u8,
     pub event: Event,

@@ -317,12 +317,6 @@ pub struct Row {
     pub seeds: usize,
 }
 
-/// A time difference of step instants to the microsecond: the steps' sums of `dt` leave float
-/// noise (0.2599999999999998 for 0.26) that the JSON would carry.
-fn whole_us(s: f64) -> f64 {
-    (s * 1e6).round() / 1e6
-}
-
 pub fn aggregate(runs: &[Run]) -> Vec<Row> {
     let Some(first) = runs.first() else {
         return vec![];
@@ -362,8 +356,8 @@ pub fn aggregate(runs: &[Run]) -> Vec<Row> {
                     }
                 },
                 excitation_low: ms.iter().map(|m| m.excitation_low).sum(),
-                detection_delay_s: worst(&|m| m.detection_delay_s).map(whole_us),
-                settle_s: worst(&|m| m.settle_s).map(whole_us),
+                detection_delay_s: worst(&|m| m.detection_delay_s).map(crate::diagnose::whole_us),
+                settle_s: worst(&|m| m.settle_s).map(crate::diagnose::whole_us),
                 gamma_rmse_3s: ms
                     .iter()
                     .map(|m| m.gamma_rmse_3s)

@@ -126,8 +126,7 @@ pub async fn run(
                 if frame.sysid != 255 && frame.sysid != 0 {
                     last_seen.insert(frame.sysid, now);
                     if lost.insert(frame.sysid, false) == Some(true) {
-                        let t = vehicle_time(monitor, frame.sysid);
-                        sink.link_event(&Decision::monitor(t, frame.sysid, Event::LinkRestored, "frames arrive again"));
+                        sink.link_event(&link_event(monitor, frame.sysid, Event::LinkRestored, "frames arrive again".into()));
                     }
                 }
                 if let Some(hz) = opts.request_rates {
@@ -155,10 +154,9 @@ pub async fn run(
                     let gone = now.duration_since(*seen) > opts.link_timeout;
                     if gone && lost.get(sysid) != Some(&true) {
                         lost.insert(*sysid, true);
-                        let t = vehicle_time(monitor, *sysid);
                         // Shortest form that shows the value (0.03 s, 2 s, 2.5 s).
                         let detail = format!("no frame for {} s", opts.link_timeout.as_secs_f64());
-                        sink.link_event(&Decision::monitor(t, *sysid, Event::LinkLost, detail));
+                        sink.link_event(&link_event(monitor, *sysid, Event::LinkLost, detail));
                     }
                 }
                 // Headless, say once that nothing arrives (the dashboard's footer says it).
@@ -450,10 +448,83 @@ async fn send_alerts(
     }
 }
 
-fn vehicle_time(monitor: &Monitor, sysid: u8) -> f64 {
+/// The vehicle's time (s) for a link event: its last sample's, else its last stamped
+/// message's; `None` when it has sent no time stamp (a HEARTBEAT-only system).
+fn vehicle_time(monitor: &Monitor, sysid: u8) -> Option<f64> {
     monitor
         .pipelines
         .get(&sysid)
         .and_then(|p| p.last_sample_t)
-        .unwrap_or(0.0)
+        .or_else(|| monitor.assembler.vehicles.get(&sysid)?.clock())
+}
+
+/// A link event at the vehicle's time; without one, at 0 and said so.
+fn link_event(monitor: &Monitor, sysid: u8, event: Event, detail: String) -> Decision {
+    match vehicle_time(monitor, sysid) {
+        Some(t) => Decision::monitor(t, sysid, event, detail),
+        None => Decision::monitor(
+            0.0,
+            sysid,
+            event,
+            format!("{detail}; t is 0: the vehicle has sent no time stamp"),
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::dialects::ahcmon::{
+        ATTITUDE_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
+    };
+    use crate::output::jsonl::MonitorFiles;
+    use crate::pipeline::PipelineConfig;
+
+    fn frame(msg: MavMessage) -> Frame {
+        Frame {
+            version: mavlink_core::MavlinkVersion::V2,
+            sysid: 3,
+            compid: 1,
+            seq: 0,
+            msg_id: mavlink_core::Message::message_id(&msg),
+            msg,
+        }
+    }
+
+    #[test]
+    fn a_link_event_is_on_the_vehicles_clock_or_says_it_has_none() {
+        let mut m = Monitor::new(PipelineConfig::default());
+        let mut sink = MonitorFiles::new(None, None, 1).unwrap();
+        sink.echo = false;
+        m.on_frame(
+            &frame(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_QUADROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_STANDBY,
+                mavlink_version: 3,
+            })),
+            &mut sink,
+        );
+        // A HEARTBEAT carries no time: t 0, and the detail says why (it read t=0.00 bare).
+        let d = link_event(&m, 3, Event::LinkLost, "no frame for 2 s".into());
+        assert_eq!(d.t, 0.0);
+        assert!(
+            d.detail
+                .as_deref()
+                .is_some_and(|s| s.contains("no time stamp"))
+        );
+        // An ATTITUDE alone (no outputs, so no sample): its stamp.
+        m.on_frame(
+            &frame(MavMessage::ATTITUDE(ATTITUDE_DATA {
+                time_boot_ms: 12_340,
+                ..Default::default()
+            })),
+            &mut sink,
+        );
+        let d = link_event(&m, 3, Event::LinkLost, "no frame for 2 s".into());
+        assert_eq!(d.t, 12.34);
+        assert_eq!(d.detail.as_deref(), Some("no frame for 2 s"));
+    }
 }

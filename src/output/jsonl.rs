@@ -71,6 +71,7 @@ pub struct ActuatorEstimate<'a> {
 
 #[derive(Debug, Serialize)]
 pub struct EstimateRecord<'a> {
+    #[serde(serialize_with = "crate::diagnose::serialize_time")]
     pub t: f64,
     pub sysid: u8,
     pub filter: &'static str,
@@ -125,6 +126,7 @@ pub struct NoiseInForce {
 
 #[derive(Debug, Serialize)]
 pub struct TruthRecord<'a> {
+    #[serde(serialize_with = "crate::diagnose::serialize_time")]
     pub t: f64,
     pub actuators: Vec<ActuatorTruth<'a>>,
     pub noise: NoiseInForce,
@@ -383,5 +385,30 @@ impl crate::pipeline::PipelineSink for MonitorFiles {
         if self.echo {
             eprintln!("sysid {sysid}: {text}");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::vehicle::Event;
+
+    #[test]
+    fn times_are_written_to_the_microsecond() {
+        // 49980 ms read as 49980 * 1e-3, and sums of 20 ms steps, carry float noise.
+        let t = 49980.0 * 1e-3;
+        assert_ne!(t.to_string(), "49.98");
+        let d = Decision::monitor(t, 1, Event::LinkLost, "no frame for 2 s");
+        let mut w = JsonlWriter::new(Vec::new());
+        w.write(&d).unwrap();
+        let line = String::from_utf8(w.out.clone()).unwrap();
+        assert!(line.starts_with(r#"{"t":49.98,"#), "{line}");
+        let p = Profile::resolve("quad-x").unwrap();
+        let est = [AhcEstimate::default(); 4];
+        let mut w = JsonlWriter::new(Vec::new());
+        w.write(&EstimateRecord::new(0.1 + 0.2, 1, 0, &est, &p))
+            .unwrap();
+        let line = String::from_utf8(w.out.clone()).unwrap();
+        assert!(line.starts_with(r#"{"t":0.3,"#), "{line}");
     }
 }

@@ -185,6 +185,11 @@ fn unwrap_u32_us(stamp: u32, reference_s: Option<f64>) -> f64 {
 }
 
 impl VehicleAssembler {
+    /// The latest vehicle time seen (s), from any stamped message; `None` before one.
+    pub fn clock(&self) -> Option<f64> {
+        self.clock
+    }
+
     pub fn new(sysid: u8, cfg: AssemblerConfig) -> Self {
         Self {
             cfg,
