@@ -1281,3 +1281,36 @@ fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
         "{motor2}"
     );
 }
+
+/// A vehicle that sends outputs but no ATTITUDE is told which half is missing.
+#[test]
+fn a_vehicle_without_attitude_is_told_what_is_missing() {
+    let dir = common::temp_dir("cli_no_attitude");
+    let full = dir.join("full.tlog");
+    let (code, _, err) = ahcmon(&[
+        "sim",
+        "--scenario",
+        "quad-x-motor2-loe",
+        "--tlog",
+        full.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let log = std::fs::read(&full).unwrap();
+    // HEARTBEAT (0) and SERVO_OUTPUT_RAW (36) only.
+    let mut kept = Vec::new();
+    for (range, id) in tlog_records(&log) {
+        if id == 0 || id == 36 {
+            kept.extend_from_slice(&log[range]);
+        }
+    }
+    let path = dir.join("outputs_only.tlog");
+    std::fs::write(&path, kept).unwrap();
+    let (code, out, err) = ahcmon(&["replay", path.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains(
+            "no complete samples (rates and outputs of the same instant): no ATTITUDE arrived"
+        ),
+        "{out}"
+    );
+}

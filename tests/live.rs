@@ -605,10 +605,35 @@ fn a_silent_link_is_told_not_waited_on_quietly() {
 
 /// ctrl-c (SIGINT) to a child, then its output.
 fn interrupt(child: std::process::Child) -> std::process::Output {
+    signal(child, "-INT")
+}
+
+fn signal(child: std::process::Child, sig: &str) -> std::process::Output {
     let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args([sig, &child.id().to_string()])
         .status()
         .unwrap();
     assert!(status.success());
     child.wait_with_output().unwrap()
+}
+
+/// SIGTERM and SIGHUP (a closed terminal) end the monitor as ctrl-c does: exit 0, summary
+/// printed (SIGHUP killed it with 129 and no summary).
+#[test]
+fn term_and_hangup_end_the_monitor_with_its_summary() {
+    for sig in ["-TERM", "-HUP"] {
+        let port = free_udp_port();
+        let child = Command::new(bin())
+            .args(["monitor", &format!("udpin:127.0.0.1:{port}"), "--headless"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Past the start-up (the signal handlers are set before the loop runs).
+        std::thread::sleep(std::time::Duration::from_millis(800));
+        let out = signal(child, sig);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(out.status.code(), Some(0), "{sig}: {stdout}");
+        assert!(stdout.contains("no vehicle seen"), "{sig}: {stdout}");
+    }
 }

@@ -114,9 +114,12 @@ pub async fn run(
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
-    // SIGTERM ends the loop like ctrl-c, so the terminal is restored and the summary printed.
+    // SIGTERM and SIGHUP (the terminal closed) end the loop like ctrl-c, so the terminal is
+    // restored and the summary printed.
     #[cfg(unix)]
     let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).ok();
+    #[cfg(unix)]
+    let mut hangup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()).ok();
     loop {
         tokio::select! {
             frame = rx.recv() => {
@@ -199,6 +202,13 @@ pub async fn run(
                 #[cfg(unix)]
                 if let Some(t) = term.as_mut() {
                     return t.recv().await;
+                }
+                std::future::pending::<Option<()>>().await
+            } => break,
+            Some(()) = async {
+                #[cfg(unix)]
+                if let Some(h) = hangup.as_mut() {
+                    return h.recv().await;
                 }
                 std::future::pending::<Option<()>>().await
             } => break,

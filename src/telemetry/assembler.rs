@@ -57,6 +57,9 @@ pub struct TelemetryCounters {
     /// Samples still waiting for their a_z when the vehicle rebooted: dropped, not fed to the
     /// new boot's filters.
     pub dropped_at_reboot: u64,
+    /// Messages of a new boot's first `REBOOT_HOLD_S`, dropped while they confirm the reboot
+    /// (not counted as reordered once it is confirmed).
+    pub confirming_reboot: u64,
     /// Frames of the autopilot its sequence numbers say never arrived intact: lost on the link,
     /// dropped above as corrupt (bad CRC) or of an unknown message id, or left out of the log. A frame that arrives late is
     /// taken off again. An outage of 256 frames or more wraps the counter and is not seen, and
@@ -150,6 +153,8 @@ pub struct VehicleAssembler {
     /// `lost_frames` when the first message of a possible reboot came: a confirmed reboot
     /// restarts the sequence, and what its jump counted is taken back.
     lost_at_reboot_candidate: u64,
+    /// Messages dropped since then (counted as reordered until the reboot is confirmed).
+    held_at_reboot_candidate: u64,
 }
 
 /// Where a_z comes from: one message type per run (see `VehicleAssembler::on_az`), in order
@@ -216,6 +221,7 @@ impl VehicleAssembler {
             pending: None,
             seq: None,
             lost_at_reboot_candidate: 0,
+            held_at_reboot_candidate: 0,
         }
     }
 
@@ -271,13 +277,21 @@ impl VehicleAssembler {
             // Not (yet) enough of the new clock: dropped and counted.
             if first.is_none() {
                 self.lost_at_reboot_candidate = self.counters.lost_frames;
+                self.held_at_reboot_candidate = 0;
             }
             self.reboot_candidate = Some(first.unwrap_or(t));
             self.counters.out_of_order += 1;
+            self.held_at_reboot_candidate += 1;
             return false;
         }
         self.reboot_candidate = None;
         self.counters.reboots += 1;
+        // The new boot's first messages were not reordered: they confirmed it.
+        let held = self
+            .held_at_reboot_candidate
+            .min(self.counters.out_of_order);
+        self.counters.out_of_order -= held;
+        self.counters.confirming_reboot += held;
         self.rebooted = true;
         if self.pending.take().is_some() {
             self.counters.dropped_at_reboot += 1;
@@ -952,6 +966,12 @@ mod tests {
         assert!(a.rebooted);
         assert_eq!(a.counters.reboots, 1);
         assert_eq!(a.counters.dropped_at_reboot, 1);
+        // The new boot's first half second (25 instants of ATTITUDE and outputs, the clock's
+        // messages) confirmed it: not reordered.
+        assert_eq!(
+            (a.counters.out_of_order, a.counters.confirming_reboot),
+            (0, 50)
+        );
         // Nothing of the old boot comes out after it; the new clock's instants do, once half a
         // second of it has confirmed the reboot.
         assert!(after.iter().all(|s| s.t < 10.0), "{after:?}");
