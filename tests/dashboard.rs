@@ -210,3 +210,16 @@ fn the_footer_says_the_selected_vehicles_link_and_names_others_lost() {
     assert!(!s.contains("link lost: sysid"), "{s}");
     assert!(s.contains("age 3.2 s") || s.contains("age 3.3 s"), "{s}");
 }
+
+/// On a short, narrow terminal the chart gives way, not the actuators, and the footer keeps
+/// its keys (at 60x15 the table had no rows and the keys were cut off).
+#[test]
+fn a_small_terminal_keeps_the_actuators_and_the_keys() {
+    let s = screen(45.0, 60, 15, false);
+    for name in ["swash1", "swash2", "swash3", "tail"] {
+        row(&s, name);
+    }
+    let footer = s.lines().last().unwrap();
+    assert!(footer.contains("q: quit"), "{s}");
+    assert!(s.lines().next().unwrap().contains("ahcmon"), "{s}");
+}

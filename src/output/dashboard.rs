@@ -177,13 +177,23 @@ pub fn render(
     let area = f.area();
     let sysids: Vec<u8> = monitor.pipelines.keys().copied().collect();
     let sysid = selected_sysid(monitor, ui);
+    // On a short terminal the chart gives way first, then the decisions: the header, the
+    // actuators and the footer stay (at 60x15 the table had no rows left).
+    let table = table_height(monitor, sysid);
+    let list = if area.height >= 40 { 10 } else { 5 };
+    let spare = area.height.saturating_sub(2 + table);
+    let (chart_min, list) = if spare >= list + 6 {
+        (6, list)
+    } else {
+        (0, list.min(spare))
+    };
     let rows = Layout::default()
         .direction(Direction::Vertical)
         .constraints([
             Constraint::Length(1),
-            Constraint::Length(table_height(monitor, sysid)),
-            Constraint::Min(6),
-            Constraint::Length(if area.height >= 40 { 10 } else { 5 }),
+            Constraint::Length(table),
+            Constraint::Min(chart_min),
+            Constraint::Length(list),
             Constraint::Length(1),
         ])
         .split(area);
@@ -517,21 +527,26 @@ fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, lost: u64, ui: &UiState) {
         format!(" · link lost: sysid {}", ids.join(", "))
     };
     let text = format!(
-        " {}{others} · {:.0} msg/s · age {age} · lost {lost} · bad crc {} resync {} unknown {} · {}",
-        link.name,
-        link.rate_hz,
-        c.bad_crc,
-        c.resync,
-        c.unknown_id,
-        if ui.paused {
-            "p resume"
-        } else {
-            "?: help q: quit"
-        }
+        " {}{others} · {:.0} msg/s · age {age} · lost {lost} · bad crc {} resync {} unknown {}",
+        link.name, link.rate_hz, c.bad_crc, c.resync, c.unknown_id,
     );
+    // The keys keep their place at the right; the counters give way on a narrow terminal.
+    let keys = if ui.paused {
+        " p resume "
+    } else {
+        " ?: help q: quit "
+    };
+    let parts = Layout::default()
+        .direction(Direction::Horizontal)
+        .constraints([Constraint::Min(0), Constraint::Length(keys.len() as u16)])
+        .split(area);
     f.render_widget(
         Paragraph::new(Line::from(vec![state, Span::raw(text)])),
-        area,
+        parts[0],
+    );
+    f.render_widget(
+        Paragraph::new(Span::styled(keys, Style::default().fg(Color::DarkGray))),
+        parts[1],
     );
 }
 
