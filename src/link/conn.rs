@@ -187,7 +187,16 @@ pub struct Link {
     pub reconnects: u64,
     /// What happened to a TCP connection since last asked (connected, lost), for the user.
     notes: std::collections::VecDeque<String>,
+    /// UDP: the sender of the datagram being parsed, and per autopilot (system id) the address
+    /// it was last heard from and when; systems already said to come from two at once.
+    datagram_from: Option<SocketAddr>,
+    autopilot_from: std::collections::BTreeMap<u8, (SocketAddr, tokio::time::Instant)>,
+    told_two_sources: std::collections::BTreeSet<u8>,
 }
+
+/// Two senders of one autopilot's system id within this of each other are two streams at once
+/// (not a sender that restarted on a new port).
+const TWO_SOURCES_WITHIN: Duration = Duration::from_secs(1);
 
 impl Link {
     pub async fn open(spec: ConnSpec) -> Result<Self, ConnError> {
@@ -261,7 +270,34 @@ impl Link {
             buf: vec![0; 65536],
             reconnects: 0,
             notes: Default::default(),
+            datagram_from: None,
+            autopilot_from: Default::default(),
+            told_two_sources: Default::default(),
         })
+    }
+
+    /// A frame from an autopilot (component 1) whose system id another address is sending
+    /// too, at the same time: said once per system id (two links to one vehicle, or two
+    /// vehicles with the same id, whose streams the monitor can only count as reordered and
+    /// duplicated).
+    fn note_source(&mut self, f: &Frame) {
+        let Some(from) = self.datagram_from else {
+            return;
+        };
+        if f.compid != 1 {
+            return;
+        }
+        let now = tokio::time::Instant::now();
+        if let Some((before, at)) = self.autopilot_from.insert(f.sysid, (from, now))
+            && before != from
+            && now.duration_since(at) < TWO_SOURCES_WITHIN
+            && self.told_two_sources.insert(f.sysid)
+        {
+            self.notes.push_back(format!(
+                "system {} is heard from {before} and from {from} at once: two links to one vehicle, or two vehicles with the same system id (its samples will count as reordered and duplicated)",
+                f.sysid
+            ));
+        }
     }
 
     /// The local address (UDP/TCP), e.g. to learn the port of `udpin:127.0.0.1:0`.
@@ -308,6 +344,7 @@ impl Link {
                 return Ok(Received::Note(note));
             }
             if let Some(f) = self.framer.next_frame() {
+                self.note_source(&f);
                 return Ok(Received::Frame(f));
             }
             let io = |spec: &ConnSpec, source| ConnError::Io {
@@ -324,12 +361,14 @@ impl Link {
                         if *learn_peer {
                             *peer = Some(from);
                         }
+                        self.datagram_from = Some(from);
                         // What the last datagram left is a partial frame that cannot complete
                         // (UDP keeps boundaries): counted, not joined to this one.
                         self.framer.end_datagram();
                         self.framer.push(&self.buf[..n]);
                         // Parse this datagram completely before the next one.
                         if let Some(f) = self.framer.next_frame() {
+                            self.note_source(&f);
                             return Ok(Received::Frame(f));
                         }
                         self.framer.end_datagram();
@@ -614,6 +653,50 @@ mod tests {
             assert_eq!(c.truncated, 1, "{c:?}");
             // The two halves were never parsed as one frame.
             assert_eq!(c.bad_crc, 0, "{c:?}");
+        });
+    }
+
+    #[test]
+    fn one_system_id_from_two_addresses_at_once_is_told_once() {
+        use crate::link::dialects::ahcmon::{HEARTBEAT_DATA, MavMessage};
+        runtime().block_on(async {
+            let spec: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
+            let mut link = Link::open(spec).await.expect("binds");
+            let to = link.local_addr().expect("addr");
+            let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
+            let frame = |sysid, compid| {
+                let mut f = Vec::new();
+                super::super::frame::encode_v2(sysid, compid, 0, &hb, &mut f);
+                f
+            };
+            let (a, b) = (
+                UdpSocket::bind("127.0.0.1:0").await.expect("bind"),
+                UdpSocket::bind("127.0.0.1:0").await.expect("bind"),
+            );
+            // System 1's autopilot from both; system 2's from one; a camera (component 100) of
+            // system 2 from the other: only system 1 is two streams.
+            for _ in 0..3 {
+                a.send_to(&frame(1, 1), to).await.expect("send");
+                b.send_to(&frame(1, 1), to).await.expect("send");
+                a.send_to(&frame(2, 1), to).await.expect("send");
+                b.send_to(&frame(2, 100), to).await.expect("send");
+            }
+            let mut notes = vec![];
+            let mut frames = 0;
+            while frames < 12 {
+                match tokio::time::timeout(Duration::from_secs(5), link.recv_or_note()).await {
+                    Ok(Ok(Received::Frame(_))) => frames += 1,
+                    Ok(Ok(Received::Note(n))) => notes.push(n),
+                    other => panic!("{other:?}"),
+                }
+            }
+            if let Ok(Ok(Received::Note(n))) =
+                tokio::time::timeout(Duration::from_millis(100), link.recv_or_note()).await
+            {
+                notes.push(n);
+            }
+            assert_eq!(notes.len(), 1, "{notes:?}");
+            assert!(notes[0].starts_with("system 1 is heard from"), "{notes:?}");
         });
     }
 }
