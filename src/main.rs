@@ -926,6 +926,9 @@ fn monitor(
         // Restore the terminal before anything is printed.
         drop(ui);
         let counters = counters?;
+        for note in &counters.unsaid_notes {
+            eprintln!("monitor: {note}");
+        }
         if let Some(h) = sim {
             // Quit before the script ended: stop the vehicle; else report how it ended.
             if h.is_finished() {

@@ -32,7 +32,9 @@ impl Monitor {
         self.run(frame.sysid, sink);
     }
 
-    /// End of input: samples still waiting for their a_z are processed without it.
+    /// End of input: samples still waiting for their a_z are processed without it, and a
+    /// reboot the new boot gave no sample after is still told (its warning, the summary's
+    /// marks).
     pub fn finish(&mut self, sink: &mut dyn PipelineSink) {
         let ids: Vec<u8> = self.assembler.vehicles.keys().copied().collect();
         for sysid in ids {
@@ -41,6 +43,13 @@ impl Monitor {
                 v.flush(&mut self.samples);
             }
             self.run(sysid, sink);
+            if let (Some(v), Some(p)) = (
+                self.assembler.vehicles.get_mut(&sysid),
+                self.pipelines.get_mut(&sysid),
+            ) && std::mem::take(&mut v.rebooted)
+            {
+                p.reset(v.clock().unwrap_or(0.0), sink);
+            }
         }
     }
 

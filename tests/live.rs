@@ -617,23 +617,59 @@ fn signal(child: std::process::Child, sig: &str) -> std::process::Output {
     child.wait_with_output().unwrap()
 }
 
+/// A headless monitor on a free port, started by `launcher` (e.g. `nohup`) when given; returns
+/// once it has said it listens (its signal handlers are set just after).
+fn started_monitor(launcher: Option<&str>) -> std::process::Child {
+    use std::io::BufRead as _;
+    let port = free_udp_port();
+    let mut cmd = match launcher {
+        Some(l) => {
+            let mut c = Command::new(l);
+            c.arg(bin());
+            c
+        }
+        None => Command::new(bin()),
+    };
+    let mut child = cmd
+        .args(["monitor", &format!("udpin:127.0.0.1:{port}"), "--headless"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    while stderr.read_line(&mut line).unwrap() > 0 && !line.contains("listening on") {
+        line.clear();
+    }
+    assert!(line.contains("listening on"), "{line}");
+    // Keep draining stderr so the child never blocks on it.
+    std::thread::spawn(move || std::io::copy(&mut stderr, &mut std::io::sink()));
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    child
+}
+
 /// SIGTERM and SIGHUP (a closed terminal) end the monitor as ctrl-c does: exit 0, summary
-/// printed (SIGHUP killed it with 129 and no summary).
+/// printed (SIGHUP killed it with 129 and no summary). Under `nohup` a hangup is ignored.
 #[test]
 fn term_and_hangup_end_the_monitor_with_its_summary() {
     for sig in ["-TERM", "-HUP"] {
-        let port = free_udp_port();
-        let child = Command::new(bin())
-            .args(["monitor", &format!("udpin:127.0.0.1:{port}"), "--headless"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        // Past the start-up (the signal handlers are set before the loop runs).
-        std::thread::sleep(std::time::Duration::from_millis(800));
-        let out = signal(child, sig);
+        let out = signal(started_monitor(None), sig);
         let stdout = String::from_utf8_lossy(&out.stdout);
         assert_eq!(out.status.code(), Some(0), "{sig}: {stdout}");
         assert!(stdout.contains("no vehicle seen"), "{sig}: {stdout}");
     }
+    let mut child = started_monitor(Some("nohup"));
+    let status = Command::new("kill")
+        .args(["-HUP", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "nohup: a hangup ended it"
+    );
+    let out = interrupt(child);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("no vehicle seen"));
 }

@@ -462,7 +462,15 @@ impl Diagnoser {
 
     /// A new flight or a restart: the stored residuals belong to another one.
     pub fn residual_gap(&mut self) {
+        self.forget_change();
+    }
+
+    /// The change test starts afresh: what it read of the faults in force goes too.
+    fn forget_change(&mut self) {
         self.change.clear();
+        for st in &mut self.actuators {
+            st.mixed_seen = false;
+        }
     }
 
     /// Samples were lost over `span` seconds. The residuals on either side of a short hole are
@@ -472,7 +480,7 @@ impl Diagnoser {
     /// what nobody saw, and the test starts afresh.
     pub fn samples_lost(&mut self, span: f64) {
         if span.is_nan() || span > MAX_HOLE_S {
-            self.change.clear();
+            self.forget_change();
         }
     }
 
@@ -662,7 +670,8 @@ impl Diagnoser {
         } else if r.margin_over(r.next_kind_drop) >= DATA_MARGIN
             && r.samples as f64 * self.dt >= CLASS_MIN_S
         {
-            // A motor's offset, or a gain change under the loss tolerance: not a class.
+            // A motor's offset, a gain change under the loss tolerance, or a kind alone after
+            // the pair fitted clearly better (`mixed_seen`): not a class.
             "(not taken as the class)"
         } else {
             "so far (not clearly)"
@@ -950,7 +959,8 @@ impl Diagnoser {
         } else {
             None
         };
-        if let Some(r) = self.reading {
+        // (Only a reading that clearly names its actuator.)
+        if let Some(r) = self.naming_reading() {
             let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
             let st = &mut self.actuators[r.actuator];
             if st.active.is_some() && long && -r.margin_over(r.mixed_drop) >= DATA_MARGIN {

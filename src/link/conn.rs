@@ -455,7 +455,11 @@ impl Link {
                         std::future::poll_fn(|cx| std::task::Poll::Ready(listener.poll_accept(cx)))
                             .await;
                     match polled {
-                        std::task::Poll::Ready(Ok((s, _))) => *stream = Some(s),
+                        std::task::Poll::Ready(Ok((s, from))) => {
+                            *stream = Some(s);
+                            self.notes
+                                .push_back(format!("a client connected from {from}"));
+                        }
                         std::task::Poll::Ready(Err(e)) => return Err(io(e)),
                         std::task::Poll::Pending => return Ok(false),
                     }
@@ -479,6 +483,7 @@ impl Link {
                         Ok(Ok(s)) => {
                             *stream = Some(s);
                             self.reconnects += 1;
+                            self.notes.push_back(format!("connected to {addr}"));
                         }
                         _ => return Ok(false),
                     }

@@ -39,11 +39,14 @@ impl Default for LiveOptions {
 }
 
 /// What the reader saw, for the summary.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct LiveCounters {
     pub link: FrameCounters,
     /// Frames dropped because the estimating side fell behind (channel full).
     pub backpressure_drops: u64,
+    /// The connection's notes (see [`super::conn::Received::Note`]) that the dashboard kept
+    /// from being said: the caller says them once the terminal is restored.
+    pub unsaid_notes: Vec<String>,
 }
 
 /// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
@@ -80,8 +83,11 @@ pub async fn run(
                 }
                 r = link.recv_or_note() => match r {
                     Ok(super::conn::Received::Note(note)) => {
+                        let note = format!("{spec}: {note}");
                         if say_notes {
-                            eprintln!("monitor: {spec}: {note}");
+                            eprintln!("monitor: {note}");
+                        } else if let Ok(mut c) = reader_counters.lock() {
+                            c.unsaid_notes.push(note);
                         }
                     }
                     Ok(super::conn::Received::Frame(frame)) => {
@@ -89,10 +95,8 @@ pub async fn run(
                             drops += 1;
                         }
                         if let Ok(mut c) = reader_counters.lock() {
-                            *c = LiveCounters {
-                                link: link.counters(),
-                                backpressure_drops: drops,
-                            };
+                            c.link = link.counters();
+                            c.backpressure_drops = drops;
                         }
                     }
                     Err(e) => break Err(e),
@@ -100,9 +104,14 @@ pub async fn run(
                 () = tx.closed() => break Ok(()),
             }
         };
-        let _ = done_tx.send(result.map(|()| LiveCounters {
-            link: link.counters(),
-            backpressure_drops: drops,
+        let _ = done_tx.send(result.map(|()| {
+            let mut c = reader_counters
+                .lock()
+                .map(|c| c.clone())
+                .unwrap_or_default();
+            c.link = link.counters();
+            c.backpressure_drops = drops;
+            c
         }));
     });
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
@@ -115,11 +124,18 @@ pub async fn run(
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
     // SIGTERM and SIGHUP (the terminal closed) end the loop like ctrl-c, so the terminal is
-    // restored and the summary printed.
+    // restored and the summary printed. Not SIGHUP when it was ignored at the start: that is
+    // `nohup`, whose monitor must outlive the terminal.
     #[cfg(unix)]
     let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).ok();
     #[cfg(unix)]
-    let mut hangup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()).ok();
+    let mut hangup = if hangup_ignored() {
+        None
+    } else {
+        tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()).ok()
+    };
+    #[cfg(not(unix))]
+    let (mut term, mut hangup): (Signal, Signal) = (None, None);
     loop {
         tokio::select! {
             frame = rx.recv() => {
@@ -187,8 +203,10 @@ pub async fn run(
                     }
                     let counters = live_counters.lock().map(|c| c.link).unwrap_or_default();
                     let age = any_frame.map(|t| now.duration_since(t).as_secs_f64());
+                    // (Vehicles only: not a second ground station or a gimbal's own system.)
                     let vehicles: crate::output::dashboard::VehicleLinks = last_seen
                         .iter()
+                        .filter(|(s, _)| monitor.assembler.vehicles.contains_key(s))
                         .map(|(s, seen)| {
                             let age = now.duration_since(*seen).as_secs_f64();
                             (*s, (age, lost.get(s) == Some(&true)))
@@ -198,20 +216,8 @@ pub async fn run(
                 }
             }
             _ = &mut ctrl_c => break,
-            Some(()) = async {
-                #[cfg(unix)]
-                if let Some(t) = term.as_mut() {
-                    return t.recv().await;
-                }
-                std::future::pending::<Option<()>>().await
-            } => break,
-            Some(()) = async {
-                #[cfg(unix)]
-                if let Some(h) = hangup.as_mut() {
-                    return h.recv().await;
-                }
-                std::future::pending::<Option<()>>().await
-            } => break,
+            Some(()) = next_signal(&mut term) => break,
+            Some(()) = next_signal(&mut hangup) => break,
         }
     }
     // Closing the channel ends the reader, which hands back its counters.
@@ -223,7 +229,7 @@ pub async fn run(
         Ok(Ok(r)) => r,
         // The reader is stuck (e.g. a tcpin send waiting for a client): its counters as of
         // its last frame, not zeros.
-        _ => Ok(live_counters.lock().map(|c| *c).unwrap_or_default()),
+        _ => Ok(live_counters.lock().map(|c| c.clone()).unwrap_or_default()),
     }
 }
 
@@ -458,14 +464,45 @@ async fn send_alerts(
     }
 }
 
-/// The vehicle's time (s) for a link event: its last sample's, else its last stamped
-/// message's; `None` when it has sent no time stamp (a HEARTBEAT-only system).
+#[cfg(unix)]
+type Signal = Option<tokio::signal::unix::Signal>;
+#[cfg(not(unix))]
+type Signal = Option<()>;
+
+/// The next delivery of a signal we listen to; never, when we do not.
+#[allow(unused_variables)]
+async fn next_signal(signal: &mut Signal) -> Option<()> {
+    #[cfg(unix)]
+    if let Some(s) = signal.as_mut() {
+        return s.recv().await;
+    }
+    std::future::pending::<Option<()>>().await
+}
+
+#[cfg(unix)]
+/// SIGHUP was ignored when the process started (`nohup`): Linux's /proc says so (SigIgn, bit
+/// 0). Elsewhere, or unreadable, taken as ignored: the hangup then keeps its default.
+fn hangup_ignored() -> bool {
+    let Ok(status) = std::fs::read_to_string("/proc/self/status") else {
+        return true;
+    };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("SigIgn:"))
+        .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        .is_none_or(|mask| mask & 1 != 0)
+}
+
+/// The vehicle's time (s) for a link event: its clock (the newest stamp of the boot it is
+/// on), else its last sample's; `None` when it has sent no time stamp (a HEARTBEAT-only
+/// system).
 fn vehicle_time(monitor: &Monitor, sysid: u8) -> Option<f64> {
     monitor
-        .pipelines
+        .assembler
+        .vehicles
         .get(&sysid)
-        .and_then(|p| p.last_sample_t)
-        .or_else(|| monitor.assembler.vehicles.get(&sysid)?.clock())
+        .and_then(|v| v.clock())
+        .or_else(|| monitor.pipelines.get(&sysid)?.last_sample_t)
 }
 
 /// A link event at the vehicle's time; without one, at 0 and said so.

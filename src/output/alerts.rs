@@ -143,26 +143,28 @@ fn short_name(prefix: &str, name: &str) -> String {
     cut_bytes(&format!("{prefix}_{name}"), 10).to_string()
 }
 
-/// Each actuator's NAMED_VALUE_FLOAT names, `[gamma, delta]`: [`short_name`], or where two of a
-/// vehicle's cut names would be the same (`esc_motor_1`, `esc_motor_2`), `g_ch<channel>`.
+/// Each actuator's NAMED_VALUE_FLOAT names, `[gamma, delta]`: [`short_name`]s, or when two of
+/// a vehicle's cut names would be the same (`esc_motor_1`, `esc_motor_2`), `g_ch<channel>`
+/// for every actuator (the channels differ; a mix could meet an actuator called `ch3`).
 fn value_names(profile: &Profile) -> Vec<[String; 2]> {
-    let cut: Vec<String> = profile
+    let cut: Vec<[String; 2]> = profile
         .actuators
         .iter()
-        .map(|a| short_name("g", &a.name))
+        .map(|a| [short_name("g", &a.name), short_name("d", &a.name)])
         .collect();
-    profile
-        .actuators
+    let unique = cut
         .iter()
-        .zip(&cut)
-        .map(|(a, c)| {
-            if cut.iter().filter(|other| *other == c).count() == 1 {
-                [short_name("g", &a.name), short_name("d", &a.name)]
-            } else {
-                [format!("g_ch{}", a.channel), format!("d_ch{}", a.channel)]
-            }
-        })
-        .collect()
+        .enumerate()
+        .all(|(j, c)| cut[..j].iter().all(|other| other[0] != c[0]));
+    if unique {
+        cut
+    } else {
+        profile
+            .actuators
+            .iter()
+            .map(|a| [format!("g_ch{}", a.channel), format!("d_ch{}", a.channel)])
+            .collect()
+    }
 }
 
 fn state_of(d: &Decision) -> Option<AhcState> {
@@ -197,7 +199,10 @@ impl Alerts {
     }
 
     pub fn on_decision(&mut self, d: &Decision) {
-        self.see(d.sysid);
+        // (A link event may be about any system the link carried; only vehicles are seen.)
+        if !matches!(d.event, Event::LinkLost | Event::LinkRestored) {
+            self.see(d.sysid);
+        }
         if let (Some(a), Some(s)) = (&d.actuator, state_of(d)) {
             self.state.insert((d.sysid, a.clone()), s);
         }
@@ -422,7 +427,7 @@ mod tests {
     #[test]
     fn value_names_are_unique_within_a_vehicle() {
         use crate::link::frame::{Parsed, parse};
-        // `esc_motor_1`..`_4` all cut to `g_esc_moto`: those take their channel instead.
+        // `esc_motor_1`..`_3` all cut to `g_esc_moto`: every actuator takes its channel.
         let mut p = Profile::resolve("quad-x").unwrap();
         for (j, a) in p.actuators.iter_mut().enumerate() {
             a.name = format!("esc_motor_{}", j + 1);
@@ -431,7 +436,12 @@ mod tests {
         let names = value_names(&p);
         assert_eq!(names[0], ["g_ch1", "d_ch1"]);
         assert_eq!(names[2], ["g_ch3", "d_ch3"]);
-        assert_eq!(names[3], ["g_tail", "d_tail"]);
+        assert_eq!(names[3], ["g_ch4", "d_ch4"]);
+        let mut apart = p.clone();
+        for (j, a) in apart.actuators.iter_mut().take(3).enumerate() {
+            a.name = format!("m{}", j + 1);
+        }
+        assert_eq!(value_names(&apart)[3], ["g_tail", "d_tail"]);
         let mut a = Alerts::default();
         let est = [AhcEstimate::default(); 4];
         a.on_estimates(1.0, 1, &[&est, &est], &p);

@@ -658,12 +658,20 @@ impl TerminalUi {
             self, Event as CEvent, KeyCode, KeyEventKind, KeyModifiers,
         };
         while event::poll(std::time::Duration::ZERO).unwrap_or(false) {
-            let Ok(CEvent::Key(k)) = event::read() else {
-                continue;
+            let k = match event::read() {
+                Ok(CEvent::Key(k)) => k,
+                // A new size is drawn even while paused.
+                Ok(CEvent::Resize(..)) => {
+                    self.pause_drawn = false;
+                    continue;
+                }
+                _ => continue,
             };
             if k.kind != KeyEventKind::Press {
                 continue;
             }
+            // Paused, the screen is drawn again for what a key changes (help, selection).
+            self.pause_drawn = false;
             let actuators = monitor
                 .pipelines
                 .values()
@@ -675,10 +683,7 @@ impl TerminalUi {
                 KeyCode::Char('c') if k.modifiers.contains(KeyModifiers::CONTROL) => {
                     return KeyAction::Quit;
                 }
-                KeyCode::Char('p') => {
-                    self.ui.paused = !self.ui.paused;
-                    self.pause_drawn = false;
-                }
+                KeyCode::Char('p') => self.ui.paused = !self.ui.paused,
                 KeyCode::Char('f') => self.ui.frozen = !self.ui.frozen,
                 KeyCode::Char('?') => self.ui.help = !self.ui.help,
                 KeyCode::Esc => self.ui.help = false,
