@@ -1280,6 +1280,26 @@ fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
         motor2.ends_with("loss_of_effectiveness at the reboot, not judged since"),
         "{motor2}"
     );
+    // A new boot that sends no complete sample before the stream ends (ATTITUDE only): the
+    // reboot is still told.
+    let mut log = std::fs::read(&first).unwrap();
+    for (range, id) in records.iter().take(400) {
+        if *id == 30 {
+            log.extend_from_slice(&second[range.clone()]);
+        }
+    }
+    std::fs::write(&both, log).unwrap();
+    let (code, out, err) = ahcmon(&["replay", both.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    let all = format!("{out}{err}");
+    assert!(
+        all.contains("rebooted with faults in force: motor2 (loss_of_effectiveness)"),
+        "{all}"
+    );
+    assert!(
+        all.contains("(before the vehicle rebooted; not estimated since)"),
+        "{all}"
+    );
 }
 
 /// A vehicle that sends outputs but no ATTITUDE is told which half is missing.
@@ -1309,7 +1329,7 @@ fn a_vehicle_without_attitude_is_told_what_is_missing() {
     assert_eq!(code, 0, "{err}");
     assert!(
         out.contains(
-            "no complete samples (rates and outputs of the same instant): no ATTITUDE arrived"
+            "no complete samples (rates and outputs of the same instant): no usable ATTITUDE arrived"
         ),
         "{out}"
     );

@@ -42,7 +42,7 @@ pub fn render(
         let c = &v.counters;
         let _ = writeln!(
             s,
-            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} messages of the new boot's first 0.5 s dropped while confirming them, {} samples dropped at them), {} stamped over a second ahead (clock jumps no second message confirmed), {} non-finite; {} frames missing from the autopilot's sequence numbers (lost on the link, or dropped as corrupt or of an unknown message id)",
+            "vehicle sysid {sysid}: type {}; telemetry: {} samples, {} unmatched rate instants, {} reordered, {} duplicates, {} reboots ({} messages of the new boots' first {} s dropped while confirming them, {} samples dropped at them), {} stamped over a second ahead (clock jumps no second message confirmed), {} non-finite; {} frames missing from the autopilot's sequence numbers (lost on the link, or dropped as corrupt or of an unknown message id)",
             v.info
                 .mav_type
                 .map_or("unknown".to_string(), |t| format!("{t:?}")
@@ -54,6 +54,7 @@ pub fn render(
             c.duplicates,
             c.reboots,
             c.confirming_reboot,
+            crate::telemetry::assembler::REBOOT_HOLD_S,
             c.dropped_at_reboot,
             c.ahead_of_clock,
             c.non_finite,
@@ -63,10 +64,10 @@ pub fn render(
             // Say which half never came.
             let missing = match (c.rate_messages, c.output_messages) {
                 (0, 0) => {
-                    ": neither ATTITUDE nor outputs (SERVO_OUTPUT_RAW, ACTUATOR_OUTPUT_STATUS) arrived"
+                    ": no usable ATTITUDE or outputs (SERVO_OUTPUT_RAW, ACTUATOR_OUTPUT_STATUS) arrived"
                 }
-                (0, _) => ": no ATTITUDE arrived",
-                (_, 0) => ": no outputs (SERVO_OUTPUT_RAW, ACTUATOR_OUTPUT_STATUS) arrived",
+                (0, _) => ": no usable ATTITUDE arrived",
+                (_, 0) => ": no usable outputs (SERVO_OUTPUT_RAW, ACTUATOR_OUTPUT_STATUS) arrived",
                 _ => "",
             };
             let _ = writeln!(

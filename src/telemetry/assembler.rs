@@ -17,7 +17,7 @@ const G0: f64 = 9.80665;
 /// clock in between (a lagging second link sends bursts of old instants, not a clock that
 /// runs on), all within `REBOOT_CONFIRM_S` of the first.
 const REBOOT_BACKSTEP_S: f64 = 1.0;
-const REBOOT_HOLD_S: f64 = 0.5;
+pub const REBOOT_HOLD_S: f64 = 0.5;
 const REBOOT_CONFIRM_S: f64 = 5.0;
 
 /// One instant of one vehicle: what an estimator step needs, before normalisation.
