@@ -382,16 +382,7 @@ fn a_px4_stream_is_read_like_an_ardupilot_one() {
     for autopilot in ["ardupilot", "px4"] {
         let tlog = dir.join(format!("{autopilot}.tlog"));
         let decisions = dir.join(format!("{autopilot}.jsonl"));
-        let (code, _, err) = ahcmon(&[
-            "sim",
-            "--scenario",
-            "quad-x-motor2-loe-live",
-            "--autopilot",
-            autopilot,
-            "--tlog",
-            tlog.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{err}");
+        sim_tlog("quad-x-motor2-loe-live", &tlog, &["--autopilot", autopilot]);
         let (code, out, err) = ahcmon(&[
             "replay",
             tlog.to_str().unwrap(),
@@ -744,6 +735,15 @@ fn sim_warns_of_a_fault_in_the_monitors_calibration_stretch() {
     );
 }
 
+/// `ahcmon sim --scenario SCENARIO [EXTRA...] --tlog PATH`, which must succeed.
+fn sim_tlog(scenario: &str, path: &std::path::Path, extra: &[&str]) {
+    let mut args = vec!["sim", "--scenario", scenario];
+    args.extend_from_slice(extra);
+    args.extend(["--tlog", path.to_str().unwrap()]);
+    let (code, _, err) = ahcmon(&args);
+    assert_eq!(code, 0, "{err}");
+}
+
 /// The records of a .tlog (8-byte time, then one MAVLink v1 or v2 frame) as (start, msgid).
 fn tlog_records(log: &[u8]) -> Vec<(std::ops::Range<usize>, u32)> {
     let mut at = 0;
@@ -888,14 +888,7 @@ fn calibrated_factors(out: &str) -> Vec<String> {
 fn a_lossy_imu_calibrates_the_rates_as_the_whole_stream_does() {
     let dir = common::temp_dir("cli_lossy_imu_calibration");
     let whole = dir.join("quad.tlog");
-    let (code, _, err) = ahcmon(&[
-        "sim",
-        "--scenario",
-        "quad-x-motor2-loe-live",
-        "--tlog",
-        whole.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    sim_tlog("quad-x-motor2-loe-live", &whole, &[]);
     let (lossy, imu) = lossy_copy(&whole, 27, 10, "cli_lossy_imu_calibration_lossy");
     assert!(imu > 2000, "{imu} RAW_IMU");
     let factors = |log: &std::path::Path| {
@@ -1003,14 +996,7 @@ fn a_calibrated_profile_sees_a_fault_from_the_take_off() {
         ("quad-x-motor2-loe-live", &healthy),
         ("quad-x-motor2-loe", &faulty),
     ] {
-        let (code, _, err) = ahcmon(&[
-            "sim",
-            "--scenario",
-            scenario,
-            "--tlog",
-            log.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{err}");
+        sim_tlog(scenario, log, &[]);
     }
     // The -live flight is healthy until 30 s after its take-off (t = 10 s).
     let profile = dir.join("quad.toml");
@@ -1125,14 +1111,7 @@ delta = 0.15
     )
     .unwrap();
     let whole = dir.join("plane.tlog");
-    let (code, _, err) = ahcmon(&[
-        "sim",
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--tlog",
-        whole.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    sim_tlog(scenario.to_str().unwrap(), &whole, &[]);
     whole
 }
 
@@ -1200,14 +1179,7 @@ fn holed_copy(
 fn outages_of_half_a_second_give_no_false_decisions() {
     let dir = common::temp_dir("cli_outages");
     let whole = dir.join("plane.tlog");
-    let (code, _, err) = ahcmon(&[
-        "sim",
-        "--scenario",
-        "plane-healthy-gusts",
-        "--tlog",
-        whole.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    sim_tlog("plane-healthy-gusts", &whole, &[]);
     let holed = holed_copy(&whole, 0.5, 5.0, 45.0, "cli_outages_holed");
     let (out, _, faults) = replay_faults(&holed);
     assert!(
@@ -1233,26 +1205,10 @@ fn outages_of_half_a_second_give_no_false_decisions() {
 fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
     let dir = common::temp_dir("cli_reboot_fault");
     let first = dir.join("first.tlog");
-    let (code, _, err) = ahcmon(&[
-        "sim",
-        "--scenario",
-        "quad-x-motor2-loe-live",
-        "--tlog",
-        first.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    sim_tlog("quad-x-motor2-loe-live", &first, &[]);
     // The second boot's first fifth (12 of 60 s): airborne, still calibrating.
     let second = dir.join("second.tlog");
-    let (code, _, err) = ahcmon(&[
-        "sim",
-        "--scenario",
-        "quad-x-motor2-loe-live",
-        "--seed",
-        "2",
-        "--tlog",
-        second.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    sim_tlog("quad-x-motor2-loe-live", &second, &["--seed", "2"]);
     let second = std::fs::read(&second).unwrap();
     let records = tlog_records(&second);
     let cut = records[records.len() / 5].0.start;
@@ -1307,14 +1263,7 @@ fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
 fn a_vehicle_without_attitude_is_told_what_is_missing() {
     let dir = common::temp_dir("cli_no_attitude");
     let full = dir.join("full.tlog");
-    let (code, _, err) = ahcmon(&[
-        "sim",
-        "--scenario",
-        "quad-x-motor2-loe",
-        "--tlog",
-        full.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    sim_tlog("quad-x-motor2-loe", &full, &[]);
     let log = std::fs::read(&full).unwrap();
     // HEARTBEAT (0) and SERVO_OUTPUT_RAW (36) only.
     let mut kept = Vec::new();
