@@ -1199,6 +1199,19 @@ fn outages_of_half_a_second_give_no_false_decisions() {
     }
 }
 
+/// The replay's output warns of the reboot with motor 2's loss in force and marks the summary's
+/// estimates as the old boot's.
+fn told_the_reboot(all: &str) {
+    assert!(
+        all.contains("rebooted with faults in force: motor2 (loss_of_effectiveness)"),
+        "{all}"
+    );
+    assert!(
+        all.contains("(before the vehicle rebooted; not estimated since)"),
+        "{all}"
+    );
+}
+
 /// A fault in force when the vehicle reboots is not cleared by it: the reboot is warned of, and
 /// while the new boot calibrates the summary's estimates and states are the old boot's, said so.
 #[test]
@@ -1220,14 +1233,7 @@ fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
     assert_eq!(code, 0, "{err}");
     let all = format!("{out}{err}");
     assert!(all.contains("filter_reset  (vehicle rebooted)"), "{all}");
-    assert!(
-        all.contains("rebooted with faults in force: motor2 (loss_of_effectiveness)"),
-        "{all}"
-    );
-    assert!(
-        all.contains("(before the vehicle rebooted; not estimated since)"),
-        "{all}"
-    );
+    told_the_reboot(&all);
     let motor2 = all
         .lines()
         .find(|l| l.trim_start().starts_with("motor2"))
@@ -1248,14 +1254,7 @@ fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
     let (code, out, err) = ahcmon(&["replay", both.to_str().unwrap(), "--headless"]);
     assert_eq!(code, 0, "{err}");
     let all = format!("{out}{err}");
-    assert!(
-        all.contains("rebooted with faults in force: motor2 (loss_of_effectiveness)"),
-        "{all}"
-    );
-    assert!(
-        all.contains("(before the vehicle rebooted; not estimated since)"),
-        "{all}"
-    );
+    told_the_reboot(&all);
 }
 
 /// A vehicle that sends outputs but no ATTITUDE is told which half is missing.

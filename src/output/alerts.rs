@@ -61,8 +61,9 @@ pub struct Alerts {
     text_queue: BTreeMap<u8, VecDeque<QueuedText>>,
     last_text: BTreeMap<u8, f64>,
     latest: BTreeMap<(u8, String), Latest>,
-    /// Per actuator its NAMED_VALUE_FLOAT names (see [`value_names`]).
-    value_names: BTreeMap<(u8, String), [String; 2]>,
+    /// Per vehicle the actuator names of its profile and their NAMED_VALUE_FLOAT names (see
+    /// [`value_names`]), in profile order.
+    value_names: BTreeMap<u8, (Vec<String>, Vec<[String; 2]>)>,
     state: BTreeMap<(u8, String), AhcState>,
     last_values: f64,
     /// The last text queued about each actuator (an actuator's newest is never dropped from
@@ -263,14 +264,15 @@ impl Alerts {
         profile: &Profile,
     ) {
         self.see(sysid);
-        if profile
-            .actuators
-            .iter()
-            .any(|a| !self.value_names.contains_key(&(sysid, a.name.clone())))
-        {
-            for (a, names) in profile.actuators.iter().zip(value_names(profile)) {
-                self.value_names.insert((sysid, a.name.clone()), names);
-            }
+        // Made again only when the profile's actuators change (a reboot, another profile).
+        let known = self
+            .value_names
+            .get(&sysid)
+            .is_some_and(|(names, _)| names.iter().eq(profile.actuators.iter().map(|a| &a.name)));
+        if !known {
+            let names = profile.actuators.iter().map(|a| a.name.clone()).collect();
+            self.value_names
+                .insert(sysid, (names, value_names(profile)));
         }
         for (j, a) in profile.actuators.iter().enumerate() {
             self.latest.insert(
@@ -342,7 +344,8 @@ impl Alerts {
                 let time_boot_ms = (l.t * 1e3).max(0.0) as u32;
                 let names = self
                     .value_names
-                    .get(&(sysid, name.clone()))
+                    .get(&sysid)
+                    .and_then(|(_, v)| v.get(usize::from(l.index)))
                     .cloned()
                     .unwrap_or_else(|| [short_name("g", &name), short_name("d", &name)]);
                 for (value_name, value) in names.iter().zip([l.ukf.gamma, l.ukf.delta]) {
