@@ -443,7 +443,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 )?;
                 let files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), decimate)
                     .context("cannot create output file")?;
-                return run_with_files(&named, named.scenario.seed, files, false);
+                // The files come from the first seed; the table (all seeds) follows as usual.
+                let written = run_with_files(&named, named.scenario.seed, files, false)?;
+                rayon::scope(|_| eval(scenarios, json, plot, seeds))?;
+                if !json {
+                    outln!("seed {}{written}", named.scenario.seed);
+                }
+                return Ok(());
             }
             // On a rayon worker, so each vehicle's two filters step on two cores.
             rayon::scope(|_| eval(scenarios, json, plot, seeds))
@@ -504,7 +510,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .with_truth(path, cfg.gyro_noise, cfg.az_noise)
                     .context("cannot create output file")?;
             }
-            run_with_files(&named, seed.unwrap_or(named.scenario.seed), files, true)
+            run_with_files(&named, seed.unwrap_or(named.scenario.seed), files, true).map(|_| ())
         }
         Command::Monitor {
             conn,
@@ -1264,7 +1270,7 @@ fn run_with_files(
     seed: u64,
     mut files: RunFiles,
     print: bool,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<String> {
     if named.scenario.is_paper() {
         return Err(UsageError(format!(
             "{} is a paper scenario; decision and truth files come from vehicle scenarios",
@@ -1277,23 +1283,34 @@ fn run_with_files(
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
     }
-    let count =
-        |w: &Option<ahcmon::output::jsonl::JsonlWriter<_>>| w.as_ref().map_or(0, |w| w.lines);
-    let truth_lines = files.truth.as_ref().map_or(0, |(w, _, _)| w.lines);
+    // Only the files asked for are named.
+    let mut parts = vec![];
+    let lines = |w: &Option<ahcmon::output::jsonl::JsonlWriter<_>>| w.as_ref().map(|w| w.lines);
+    if let Some(n) = lines(&files.decisions) {
+        parts.push(format!("{n} decision lines"));
+    }
+    if let Some(n) = lines(&files.estimates) {
+        parts.push(format!("{n} estimate lines"));
+    }
+    if let Some((w, _, _)) = &files.truth {
+        parts.push(format!("{} truth lines", w.lines));
+    }
+    let written = if parts.is_empty() {
+        String::new()
+    } else {
+        format!("; written: {}", parts.join(", "))
+    };
     if print {
         outln!(
-            "{}: {} s of {} (seed {}), {} decisions; written: {} decision lines, {} estimate lines, {} truth lines",
+            "{}: {} s of {} (seed {}), {} decisions{written}",
             named.name,
             named.scenario.duration_s,
             run.vehicle,
             seed,
             files.decisions_made,
-            count(&files.decisions),
-            count(&files.estimates),
-            truth_lines
         );
     }
-    Ok(())
+    Ok(written)
 }
 
 fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> {

@@ -364,10 +364,7 @@ fn sim_without_files_prints_its_decisions() {
         "{out}"
     );
     assert!(
-        out.contains(&format!(
-            "{} decisions; written: 0 decision lines",
-            lines.len()
-        )),
+        out.ends_with(&format!("{} decisions\n", lines.len())),
         "{out}"
     );
 }
@@ -1279,6 +1276,29 @@ fn a_vehicle_without_attitude_is_told_what_is_missing() {
         out.contains(
             "no complete samples (rates and outputs of the same instant): no usable ATTITUDE arrived"
         ),
+        "{out}"
+    );
+}
+
+/// `eval X --decisions F` writes the first seed's decisions and still prints the table (it
+/// printed nothing at all, as if the run had been lost).
+#[test]
+fn eval_with_a_decisions_file_still_prints_its_table() {
+    let dir = common::temp_dir("cli_eval_decisions");
+    let file = dir.join("d.jsonl");
+    let (code, out, err) = ahcmon(&[
+        "eval",
+        "quad-x-motor2-loe",
+        "--decisions",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let lines = std::fs::read_to_string(&file).unwrap().lines().count();
+    assert!(lines > 0, "no decisions written");
+    assert!(out.starts_with("scenario "), "{out}");
+    assert_eq!(out.matches("\nquad-x-motor2-loe ").count(), 2, "{out}");
+    assert!(
+        out.contains(&format!("seed 1; written: {lines} decision lines\n")),
         "{out}"
     );
 }
