@@ -219,6 +219,10 @@ enum Command {
         /// Start from this profile's geometry instead of the detected one.
         #[arg(long, value_name = "NAME|FILE")]
         profile: Option<String>,
+        /// Calibrate this vehicle (MAVLink system id) of a log that holds several (default:
+        /// the first whose stretch completes; the others are named).
+        #[arg(long, value_name = "ID")]
+        sysid: Option<u8>,
     },
     /// Replay a telemetry log (.tlog from any ground station) through both filters and the
     /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
@@ -593,7 +597,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             until,
             output,
             profile,
-        } => calibrate(&file, until, &output, profile.as_deref()),
+            sysid,
+        } => calibrate(&file, until, &output, profile.as_deref(), sysid),
         Command::Replay {
             file,
             run,
@@ -983,6 +988,7 @@ fn calibrate(
     until: f64,
     output: &std::path::Path,
     profile: Option<&str>,
+    only: Option<u8>,
 ) -> anyhow::Result<()> {
     let until = positive("--until", until)?;
     let mut inputs = vec![file];
@@ -1001,18 +1007,41 @@ fn calibrate(
         calibrate_until: Some(until),
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
+    // Echoed: the pipeline's progress and warnings (a short stretch, a poor fit, a profile of
+    // another kind, outputs without PWM) concern the profile written. No decision comes before
+    // the calibration, where this stops.
     let mut files = MonitorFiles::new(None, None, 1)?;
-    files.echo = false;
     let mut found = None;
     while let Some((_, frame)) = reader.next_frame().map_err(input_error)? {
         monitor.on_frame(&frame, &mut files);
         if let Some((sysid, p)) = monitor
             .pipelines
             .iter()
-            .find(|(_, p)| p.fit.is_some() || p.arx.is_some())
+            .find(|(id, p)| only.is_none_or(|s| s == **id) && (p.fit.is_some() || p.arx.is_some()))
         {
             found = Some((*sysid, p.profile().cloned(), p.fit.clone(), p.arx.clone()));
             break;
+        }
+    }
+    if let Some((chosen, ..)) = &found
+        && only.is_none()
+    {
+        // Read on (quietly) only to learn which other vehicles the log holds.
+        files.echo = false;
+        while let Ok(Some((_, frame))) = reader.next_frame() {
+            monitor.on_frame(&frame, &mut files);
+        }
+        let others: Vec<String> = monitor
+            .pipelines
+            .keys()
+            .filter(|id| *id != chosen)
+            .map(|id| id.to_string())
+            .collect();
+        if !others.is_empty() {
+            eprintln!(
+                "the log also holds sysid {}: calibrating sysid {chosen}, the first to complete its stretch (--sysid chooses)",
+                others.join(", ")
+            );
         }
     }
     let Some((sysid, Some(mut calibrated), fit, arx)) = found else {
@@ -1020,6 +1049,7 @@ fn calibrate(
         let reasons: Vec<String> = monitor
             .pipelines
             .iter()
+            .filter(|(id, _)| only.is_none_or(|s| s == **id))
             .map(|(sysid, p)| {
                 let heartbeat = monitor
                     .assembler
@@ -1032,7 +1062,17 @@ fn calibrate(
                 format!("sysid {sysid}: {why}")
             })
             .collect();
-        let why = if reasons.is_empty() {
+        let why = if let (true, Some(id)) = (reasons.is_empty(), only) {
+            let ids: Vec<String> = monitor.pipelines.keys().map(|i| i.to_string()).collect();
+            format!(
+                "no vehicle with sysid {id} (vehicles with rates and outputs: {})",
+                if ids.is_empty() {
+                    "none".into()
+                } else {
+                    ids.join(", ")
+                }
+            )
+        } else if reasons.is_empty() {
             "no vehicle with rates and outputs in it".to_string()
         } else {
             reasons.join("; ")

@@ -179,7 +179,7 @@ pub struct PipelineCounters {
     /// Samples without a_z when the model measures it: skipped while estimating, left out of
     /// the a_z fit (not the rates') while calibrating.
     pub missing_az: u64,
-    /// Samples dropped because an actuator's output channel carried no PWM (0 or absent).
+    /// Samples dropped because an actuator's output channel carried no PWM (0 or absent) or not a pulse width (over `MAX_PWM_US`).
     pub missing_output: u64,
     pub decisions: u64,
 }
@@ -188,6 +188,10 @@ pub struct PipelineCounters {
 /// joined a flight under way (a real vehicle spends longer than this on the ground between
 /// boot and take-off; a simulator starts airborne at boot).
 const JOINED_IN_FLIGHT_S: f64 = 30.0;
+/// Longest output pulse taken as a command (µs): servo and ESC pulses stay within 500-2500;
+/// 65535 marks an unused channel.
+pub const MAX_PWM_US: f64 = 3000.0;
+
 /// A calibration stretch shorter than this (s) is warned about.
 const SHORT_CALIBRATION_S: f64 = 10.0;
 /// With a profile whose model `ahcmon calibrate` identified, the samples collected after the
@@ -328,6 +332,24 @@ impl VehiclePipeline {
     pub fn why_not_estimating(&self, heartbeat: bool) -> Option<String> {
         if self.counters.steps > 0 {
             return None;
+        }
+        // Samples were there but unusable: said first, or the landing (or the end of the
+        // data) reads as the cause.
+        let airborne = self.gate.longest_airborne_s.max(
+            self.airborne_since
+                .zip(self.last_sample_t)
+                .map_or(0.0, |(a, b)| b - a),
+        );
+        let unusable = match &self.stage {
+            Stage::Calibrating { samples, .. } => samples.is_empty(),
+            Stage::Grounded => airborne > 0.0,
+            _ => false,
+        };
+        if unusable && self.counters.missing_output > 0 {
+            return Some(format!(
+                "airborne for {airborne:.1} s, but {} samples were dropped for an output channel without a pulse width (said above): the profile has outputs this vehicle does not drive",
+                self.counters.missing_output
+            ));
         }
         // Still calibrating when the data ended.
         if let Stage::Calibrating { samples, profile } = &self.stage {
@@ -491,7 +513,7 @@ impl VehiclePipeline {
     }
 
     /// The profile's actuators' commands, normalised; Err(index of the first actuator whose
-    /// channel carried no PWM).
+    /// channel carried no PWM, or not a pulse width).
     fn normalise(profile: &Profile, s: &TelemetrySample) -> Result<[f64; MAX_ACTUATORS], usize> {
         let mut u = [0.0; MAX_ACTUATORS];
         for (j, a) in profile.actuators.iter().enumerate() {
@@ -500,7 +522,9 @@ impl VehiclePipeline {
                 .and_then(|c| s.pwm.get(c))
                 .copied()
                 .unwrap_or(0);
-            if pwm == 0 {
+            // 0: the channel is unused; 65535 (UINT16_MAX) marks it unused too, and no servo
+            // or ESC pulse is longer than MAX_PWM_US.
+            if pwm == 0 || f64::from(pwm) > MAX_PWM_US {
                 return Err(j);
             }
             u[j] = profile.normalise(j, f64::from(pwm));
@@ -523,11 +547,23 @@ impl VehiclePipeline {
                 counters.missing_output += 1;
                 if !std::mem::replace(warned, true) {
                     let a = &profile.actuators[j];
+                    let pwm = usize::from(a.channel)
+                        .checked_sub(1)
+                        .and_then(|c| s.pwm.get(c))
+                        .copied()
+                        .unwrap_or(0);
+                    let what = if pwm == 0 {
+                        format!("no PWM on output channel {} ({})", a.channel, a.name)
+                    } else {
+                        format!(
+                            "output channel {} ({}) reads {pwm} µs, not a pulse width (over {MAX_PWM_US} µs; 65535 marks an unused channel)",
+                            a.channel, a.name
+                        )
+                    };
                     sink.message(
                         sysid,
                         &format!(
-                            "warning: no PWM on output channel {} ({}): samples without it are dropped and counted",
-                            a.channel, a.name
+                            "warning: {what}: samples without a pulse width are dropped and counted"
                         ),
                     );
                 }
@@ -1255,6 +1291,8 @@ mod tests {
         Lost,
         NoAz,
         NoPwm,
+        /// The channel reads 65535, the unused marker (it had been taken as a command of 10.7).
+        UnusedMarker,
     }
 
     /// Flies the simulated quad through the pipeline, `damage(k, estimating)` deciding what
@@ -1293,8 +1331,10 @@ mod tests {
             for (j, a) in profile.actuators.iter().enumerate() {
                 pwm[usize::from(a.channel) - 1] = profile.to_pwm(j, s.u[j]).round() as u16;
             }
-            if d == Damage::NoPwm {
-                pwm[2] = 0;
+            match d {
+                Damage::NoPwm => pwm[2] = 0,
+                Damage::UnusedMarker => pwm[2] = u16::MAX,
+                _ => {}
             }
             let sample = TelemetrySample {
                 t: s.t,
@@ -1323,7 +1363,7 @@ mod tests {
 
     /// While estimating: every lost sample and every sample without a_z leaves a counted gap
     /// (the next step does not pretend to follow the previous one); a sample whose actuator
-    /// channel carries no PWM is counted and said once.
+    /// channel carries no PWM (or the unused marker) is counted and said once.
     #[test]
     fn estimating_counts_lost_samples_missing_az_and_missing_outputs() {
         let damage = |k: usize, estimating: bool| match k % 50 {
@@ -1331,6 +1371,7 @@ mod tests {
             7 => Damage::Lost,
             21 => Damage::NoAz,
             33 => Damage::NoPwm,
+            41 => Damage::UnusedMarker,
             _ => Damage::Intact,
         };
         let (clean, _, _) = fly_quad(false);
@@ -1340,12 +1381,12 @@ mod tests {
         let c = p.counters;
         let each = c.missing_az;
         assert!(each >= 5, "{c:?}");
-        assert_eq!(c.missing_output, each, "{c:?}");
+        assert_eq!(c.missing_output, 2 * each, "{c:?}");
         // One gap after each lost sample, each sample without a_z and each without outputs.
-        assert_eq!(c.gaps, 3 * each, "{c:?}");
-        // And no filter step for any of the three: the filters coast over each period.
-        assert_eq!(clean.counters.steps - c.steps, 3 * each, "{c:?}");
-        assert_eq!(c.coasted, 3 * each, "{c:?}");
+        assert_eq!(c.gaps, 4 * each, "{c:?}");
+        // And no filter step for any of them: the filters coast over each period.
+        assert_eq!(clean.counters.steps - c.steps, 4 * each, "{c:?}");
+        assert_eq!(c.coasted, 4 * each, "{c:?}");
         assert_eq!(clean.counters.coasted, 0);
         assert_eq!(c.filter_errors, 0, "{c:?}");
         let warnings: Vec<_> = said.0.iter().filter(|m| m.contains("no PWM")).collect();

@@ -94,11 +94,57 @@ pub fn parse<T: DeserializeOwned>(
         line: error_line(text, &e),
         message: e.message().trim().replace('\n', " "),
     })?;
-    validate(&value).map_err(|message| TomlFileError::Invalid {
-        path: path.to_string(),
-        message,
+    validate(&value).map_err(|message| match key_line(text, &message) {
+        Some(line) => TomlFileError::Parse {
+            path: path.to_string(),
+            line,
+            message,
+        },
+        None => TomlFileError::Invalid {
+            path: path.to_string(),
+            message,
+        },
     })?;
     Ok(value)
+}
+
+/// The 1-based line of the key a validation message starts with (`noise.gyro must be ...`,
+/// `model: ...`): a `key = ` line under its table, or the table's header. None when the key is
+/// not written as such (an inline table, an array of tables, a default).
+fn key_line(text: &str, message: &str) -> Option<usize> {
+    let end = message
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '.'))
+        .unwrap_or(message.len());
+    let key = &message[..end];
+    if key.is_empty() || !message[end..].starts_with([' ', ':']) {
+        return None;
+    }
+    let mut table = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if let Some(header) = line.strip_prefix('[') {
+            if header.starts_with('[') {
+                // Arrays of tables hold many entries of one key: no single line to name.
+                table = "\u{0}".into();
+                continue;
+            }
+            table = header.trim_end_matches(']').trim().to_string();
+            if table == key {
+                return Some(i + 1);
+            }
+        } else if let Some((k, _)) = line.split_once('=') {
+            let k = k.trim();
+            let full = if table.is_empty() {
+                k.to_string()
+            } else {
+                format!("{table}.{k}")
+            };
+            if full == key {
+                return Some(i + 1);
+            }
+        }
+    }
+    None
 }
 
 /// 1-based line of a TOML error (0 when the error has no position).
@@ -161,7 +207,20 @@ mod tests {
         let msg = e.to_string();
         assert!(msg.starts_with("t.toml:3: "), "{msg}");
         assert!(msg.contains("colour"), "{msg}");
-        let e = parse::<Thing>("size = -1.0\n", "t.toml", positive).unwrap_err();
-        assert_eq!(e.to_string(), "t.toml: size must be positive (got -1)");
+        // A value check names the line of its key too.
+        let e = parse::<Thing>("# a thing\nsize = -1.0\n", "t.toml", positive).unwrap_err();
+        assert_eq!(e.to_string(), "t.toml:2: size must be positive (got -1)");
+    }
+
+    #[test]
+    fn a_value_check_finds_its_key_under_its_table() {
+        let text = "rate_hz = 0\n[model]\ndamping = 1\n[noise]\ngyro = nan\n[[fault]]\ngyro = 1\n";
+        assert_eq!(key_line(text, "rate_hz must be positive"), Some(1));
+        assert_eq!(key_line(text, "noise.gyro must be positive"), Some(5));
+        assert_eq!(key_line(text, "model: numbers must be finite"), Some(2));
+        // Not written (a default), or in an array of tables: no line.
+        assert_eq!(key_line(text, "noise.az must be positive"), None);
+        assert_eq!(key_line(text, "fault.gyro must be positive"), None);
+        assert_eq!(key_line(text, "the actuators overlap"), None);
     }
 }

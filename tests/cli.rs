@@ -689,18 +689,94 @@ fn a_calibration_end_outside_the_flight_is_explained() {
     assert!(out.contains("but the data end at t=153."), "{out}");
     let dir = common::temp_dir("cli_calibrate_window");
     let p = dir.join("p.toml");
-    assert_one_line_error(
-        &[
-            "calibrate",
-            l,
-            "--until",
-            "1000",
-            "--output",
-            p.to_str().unwrap(),
-        ],
-        &["t = 1000 s", "the data end at t=153."],
+    // calibrate says its progress first (as replay does); the error is the last line.
+    let (code, _, err) = ahcmon(&["calibrate", l, "--until", "1000", "-o", p.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    let last = err.trim_end().lines().last().unwrap_or_default();
+    assert!(
+        last.contains("t = 1000 s") && last.contains("the data end at t=153."),
+        "{err}"
     );
     assert!(!p.exists());
+}
+
+/// `calibrate` shows the warnings that concern the profile it writes (they were swallowed: a
+/// 2.6 s stretch or a helicopter profile on a quad went by unsaid), says why when the profile
+/// has outputs the vehicle lacks (not "it had landed"), and names a log's other vehicles.
+#[test]
+fn calibrate_says_what_concerns_the_profile_it_writes() {
+    let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let l = log.to_str().unwrap();
+    let dir = common::temp_dir("cli_calibrate_says");
+    let p = dir.join("p.toml");
+    let o = p.to_str().unwrap();
+    let (code, _, err) = ahcmon(&["calibrate", l, "--until", "80", "-o", o]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("warning: the calibration stretch is only"),
+        "{err}"
+    );
+    let (code, _, err) = ahcmon(&[
+        "calibrate",
+        l,
+        "--until",
+        "120",
+        "-o",
+        o,
+        "--profile",
+        "heli-h3-120",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("warning: the profile heli-h3-120 is for a helicopter"),
+        "{err}"
+    );
+    let (code, _, err) = ahcmon(&[
+        "calibrate",
+        l,
+        "--until",
+        "120",
+        "-o",
+        o,
+        "--profile",
+        "hexa-x",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    let last = err.trim_end().lines().last().unwrap_or_default();
+    assert!(
+        last.contains("dropped for an output channel without a pulse width"),
+        "{err}"
+    );
+    // Two vehicles: the same log, its frames also sent as system 2.
+    let two = dir.join("two.tlog");
+    let mut r = ahcmon::link::TlogReader::open(&log).unwrap();
+    let mut w = ahcmon::link::TlogWriter::create(&two).unwrap();
+    while let Some((ts, f)) = r.next_frame().unwrap() {
+        w.write(ts, f.sysid, f.compid, &f.msg).unwrap();
+        if f.sysid == 1 {
+            w.write(ts, 2, f.compid, &f.msg).unwrap();
+        }
+    }
+    w.flush().unwrap();
+    let t = two.to_str().unwrap();
+    let (code, _, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("the log also holds sysid 2: calibrating sysid 1"),
+        "{err}"
+    );
+    let (code, out, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o, "--sysid", "2"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("(sysid 2)") && !err.contains("also holds"),
+        "{out}{err}"
+    );
+    let (code, _, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o, "--sysid", "7"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("no vehicle with sysid 7 (vehicles with rates and outputs: 1, 2)"),
+        "{err}"
+    );
 }
 
 /// A MAVLink stream whose fault falls in what a default monitor calibrates on is warned of;
@@ -1130,7 +1206,11 @@ fn a_link_losing_one_frame_in_five_gives_no_false_decisions() {
             summary_count(&out, "lost periods coasted over") > 300,
             "{out}"
         );
-        assert_eq!(summary_count(&out, "filter resets"), 0, "{out}");
+        assert_eq!(
+            summary_count(&out, "filter resets after a failed step"),
+            0,
+            "{out}"
+        );
         let first = faults.first().expect("the aileron bias is decided");
         let t = first["t"].as_f64().unwrap();
         assert!((45.0..47.0).contains(&t), "seed {seed}: decided at {t} s");

@@ -1211,10 +1211,26 @@ impl Diagnoser {
                     // decisions read so were wrong). Say the output is off and let the class
                     // follow.
                     let pending = c == FaultClass::Stuck && self.data_class(j).is_none();
-                    let c = if pending { FaultClass::Unclassified } else { c };
+                    // The fallback's class from a MIT-UKF still within the tolerances (the
+                    // MIT-ESMF alarmed first) is the sign of noise: the TradHeli SITL servo 3
+                    // gain loss read "bias, gamma 1.00, delta +0.000".
+                    let e = self.actuators[j].channels[0].last;
+                    let unmoved = mixed
+                        && (e.gamma - 1.0).abs() < self.params.loe_tau
+                        && self.actuators[j].channels[0].e.abs() < self.params.threshold;
+                    let c = if pending || unmoved {
+                        FaultClass::Unclassified
+                    } else {
+                        c
+                    };
                     let mut d = self.decision(t, j, Event::Fault, Some(c), filters);
                     d.also = self.also(j);
-                    if pending {
+                    if unmoved {
+                        d.detail = Some(format!(
+                            "effective output off by {:+.3} in the MIT-UKF, whose gain and bias (the class is read from them) are still within their tolerances: the class follows",
+                            self.actuators[j].channels[0].e,
+                        ));
+                    } else if pending {
                         d.detail = Some(format!(
                             "effective output off by {:+.3} (gamma*u+delta at the operating point); gain, bias and stuck not told apart yet: the class follows",
                             self.actuators[j].channels[0].e,

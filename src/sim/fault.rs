@@ -143,6 +143,21 @@ impl Fault {
                 self.actuator, self.t
             ));
         }
+        // A stuck output overrides the rest: anything set beside it would be silently dropped.
+        if self.stuck.is_some() && kinds[..3].iter().any(|k| *k) {
+            return Err(format!(
+                "fault on `{}` at t = {}: stuck sets the output alone; gamma, delta, sine and ramp cannot go with it (give them as another fault)",
+                self.actuator, self.t
+            ));
+        }
+        if let Some(r) = self.ramp
+            && (r.duration_s.is_nan() || r.duration_s <= 0.0)
+        {
+            return Err(format!(
+                "fault on `{}`: ramp.duration_s must be positive (got {}; a step is gamma or delta alone)",
+                self.actuator, r.duration_s
+            ));
+        }
         let mut nums = vec![("t", self.t)];
         nums.extend(self.until.map(|v| ("until", v)));
         nums.extend(self.gamma.map(|v| ("gamma", v)));
@@ -237,5 +252,34 @@ mod tests {
         let st = fault("actuator='lon'\nt=0.0\nstuck=0.05");
         assert_eq!(st.health_at(1.0), Some((0.0, 0.05)));
         assert_eq!(health_of(&[g], "lat", 20.0), (1.0, 0.0));
+    }
+
+    #[test]
+    fn faults_that_would_drop_part_of_themselves_are_refused() {
+        let refused = [
+            (
+                "actuator='lon'\nt=1.0\ngamma=0.7\nstuck=0.5",
+                "stuck sets the output alone",
+            ),
+            (
+                "actuator='lon'\nt=1.0\nstuck=0.5\nsine={amplitude=0.02, omega_rad_s=1.0}",
+                "stuck sets the output alone",
+            ),
+            (
+                "actuator='lon'\nt=1.0\nramp={duration_s=-3.0, gamma=0.5}",
+                "ramp.duration_s must be positive (got -3",
+            ),
+            (
+                "actuator='lon'\nt=1.0\nramp={duration_s=0.0, gamma=0.5}",
+                "ramp.duration_s must be positive (got 0",
+            ),
+        ];
+        for (toml, want) in refused {
+            let e = fault(toml).validate().unwrap_err();
+            assert!(e.contains(want), "{toml}: {e}");
+        }
+        // Gain, bias, sine and ramp compose (see describe), so they may go together.
+        let composed = "actuator='lon'\nt=1.0\ngamma=0.8\ndelta=0.1\nramp={duration_s=5.0}";
+        assert_eq!(fault(composed).validate(), Ok(()));
     }
 }

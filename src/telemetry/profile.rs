@@ -331,6 +331,14 @@ impl Profile {
                 }
             }
         }
+        // An identified ARX profile without its model would be flown on the bare geometry and
+        // trusted as identified (false alarms from the first second).
+        if self.identified && m.dynamics == Dynamics::Arx && m.arx.is_none() {
+            return Err(
+                "identified = true with dynamics = \"arx\" needs its [model.arx] section (as `ahcmon calibrate` writes it); without it, set identified = false to calibrate in flight"
+                    .into(),
+            );
+        }
         if let Some(a) = &m.arx {
             if a.input.len() != l || (!a.vertical.is_empty() && a.vertical.len() != l) {
                 return Err(format!(
@@ -595,6 +603,19 @@ mod tests {
         assert!(e.contains("wobble"), "{e}");
         let line: usize = e.split(':').nth(1).unwrap().parse().unwrap();
         assert!(line > 1);
+    }
+
+    /// An identified ARX profile whose model was left out would run on the bare geometry as if
+    /// identified (11 false decisions on the SITL heli manoeuvres log).
+    #[test]
+    fn an_identified_arx_profile_needs_its_model() {
+        let text = include_str!("../../replay/profiles/heli-h3-120.toml");
+        assert!(Profile::from_toml(text, "h.toml").is_ok());
+        let identified = text.replacen("rate_hz = 50.0", "rate_hz = 50.0\nidentified = true", 1);
+        let e = Profile::from_toml(&identified, "h.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs its [model.arx] section"), "{e}");
     }
 
     #[test]
