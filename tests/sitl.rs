@@ -281,8 +281,25 @@ fn heli_maneuvers_servo3_gain_fault() {
         "sitl_heli_maneuvers_servo3_gain0p75/sitl_heli_maneuvers_servo3_gain0p75.tlog",
         None,
     );
-    let (_, both) = only_faults_on(&c, on, "swash3");
+    let (faults, both) = only_faults_on(&c, on, "swash3");
     assert!(both.t - on <= 2.0, "both filters at +{:.2} s", both.t - on);
+    // A gain loss is never called a bias: the first decision (the MIT-ESMF's, the MIT-UKF
+    // still at gamma 1.00, delta 0.000) said bias from the sign of noise, and kept it 6.6 s.
+    // The class is loss of effectiveness by +3 s.
+    let classes: Vec<(f64, FaultClass)> = faults
+        .iter()
+        .map(|d| (d.t - on, d.class.expect("a class")))
+        .collect();
+    assert!(
+        classes.iter().all(|(_, c)| *c != FaultClass::Bias),
+        "{classes:?}"
+    );
+    assert!(
+        classes
+            .iter()
+            .any(|(t, c)| *t <= 3.0 && *c == FaultClass::LossOfEffectiveness),
+        "{classes:?}"
+    );
     // The manoeuvres move servo 3 enough to separate gain and bias: its MIT-UKF gamma within
     // 0.1 of 0.75 from 5 s after the onset until the removal.
     let window: Vec<f64> = c
