@@ -4,7 +4,7 @@
 
 mod common;
 
-use ahcmon::diagnose::vehicle::Decision;
+use ahcmon::diagnose::vehicle::{Decision, Event};
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
 use ahcmon::output::dashboard::{History, LinkInfo, UiState, render};
@@ -222,4 +222,27 @@ fn a_small_terminal_keeps_the_actuators_and_the_keys() {
     let footer = s.lines().last().unwrap();
     assert!(footer.contains("q: quit"), "{s}");
     assert!(s.lines().next().unwrap().contains("ahcmon"), "{s}");
+}
+
+/// The newest decision is shown in full, wrapped (its numbers and detail were cut at the
+/// terminal's edge: "... gamma 0.80 [0.35, 1.24]  del"); the vehicle's id, which the header
+/// gives, is not repeated on each line.
+#[test]
+fn the_newest_decision_is_shown_in_full() {
+    let (m, d, hist) = state_at(50.0);
+    let newest = d
+        .iter()
+        .rev()
+        .find(|d| d.event != Event::ExcitationLow)
+        .expect("a decision by t=50 s");
+    let detail = newest.detail.as_deref().expect("a detail");
+    let s = draw(&m, &d, &hist, 100, 32, false);
+    let squeeze = |s: &str| {
+        s.chars()
+            .filter(|c| !c.is_whitespace() && *c != '│')
+            .collect::<String>()
+    };
+    assert!(squeeze(&s).contains(&squeeze(detail)), "{detail}\n{s}");
+    assert!(!s.contains("sysid 1  changed"), "{s}");
+    assert!(s.contains("changed  swash2 (ch 2)"), "{s}");
 }

@@ -8,7 +8,7 @@ use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::link::FrameCounters;
 use crate::model::MAX_ACTUATORS;
 use crate::monitor::Monitor;
-use crate::output::jsonl::describe;
+use crate::output::jsonl::describe_with;
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Direction, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
@@ -180,7 +180,8 @@ pub fn render(
     // On a short terminal the chart gives way first, then the decisions: the header, the
     // actuators and the footer stay (at 60x15 the table had no rows left).
     let table = table_height(monitor, sysid);
-    let list = if area.height >= 40 { 10 } else { 5 };
+    // Four rows inside: the newest decision wrapped on up to three, one for the one before.
+    let list = if area.height >= 40 { 10 } else { 6 };
     let spare = area.height.saturating_sub(2 + table);
     let (chart_min, list) = if spare >= list + 6 {
         (6, list)
@@ -467,21 +468,36 @@ fn chart(
 
 fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Option<u8>) {
     let n = area.height.saturating_sub(2) as usize;
-    let lines: Vec<Line> = decisions
+    let width = area.width.saturating_sub(2) as usize;
+    let mut lines: Vec<Line> = vec![];
+    for (k, d) in decisions
         .iter()
         .rev()
         .filter(|d| sysid.is_none_or(|s| d.sysid == s))
-        .take(n)
-        .map(|d| {
-            let style = match d.event {
-                Event::Fault | Event::Changed => Style::default().fg(Color::Red),
-                Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
-                Event::LinkLost | Event::FilterReset => Style::default().fg(Color::Yellow),
-                Event::ExcitationLow => Style::default().fg(Color::DarkGray),
-            };
-            Line::styled(describe(d), style)
-        })
-        .collect();
+        .enumerate()
+    {
+        if lines.len() >= n {
+            break;
+        }
+        let style = match d.event {
+            Event::Fault | Event::Changed => Style::default().fg(Color::Red),
+            Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
+            Event::LinkLost | Event::FilterReset => Style::default().fg(Color::Yellow),
+            Event::ExcitationLow => Style::default().fg(Color::DarkGray),
+        };
+        // The vehicle shown is the selected one: its id on every line only cuts the rest.
+        let text = describe_with(d, sysid.is_none());
+        // The newest in full (its numbers and detail are what the operator reads now), as
+        // many lines as it needs but one left for the one before; the older one line each.
+        let room = if k == 0 {
+            n.saturating_sub(1).max(1)
+        } else {
+            1
+        };
+        for part in wrap(&text, width).into_iter().take(room) {
+            lines.push(Line::styled(part, style));
+        }
+    }
     f.render_widget(
         Paragraph::new(lines).block(
             Block::default()
@@ -490,6 +506,48 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
         ),
         area,
     );
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces (a word longer than a line
+/// is cut); the continuation lines are indented by two.
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    if width < 8 {
+        return vec![text.to_string()];
+    }
+    let mut out: Vec<String> = vec![];
+    let mut line = String::new();
+    let mut len = 0;
+    for word in text.split(' ') {
+        let wlen = word.chars().count();
+        if len > 0 && len + wlen > width {
+            out.push(std::mem::take(&mut line));
+            line.push_str("  ");
+            len = 2;
+            if word.is_empty() {
+                continue;
+            }
+        }
+        let mut rest: Vec<char> = word.chars().collect();
+        while len + rest.len() > width {
+            let cut = width - len;
+            line.extend(&rest[..cut]);
+            out.push(std::mem::take(&mut line));
+            line.push_str("  ");
+            len = 2;
+            rest.drain(..cut);
+        }
+        line.extend(&rest);
+        len += rest.len();
+        if len < width {
+            line.push(' ');
+            len += 1;
+        }
+    }
+    let last = line.trim_end();
+    if !last.trim().is_empty() || out.is_empty() {
+        out.push(last.to_string());
+    }
+    out
 }
 
 /// `lost`: the vehicles' frames their sequence numbers say never arrived.
@@ -759,5 +817,28 @@ impl TerminalUi {
 impl Drop for TerminalUi {
     fn drop(&mut self) {
         restore_terminal();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrap;
+
+    #[test]
+    fn wrap_keeps_every_word_within_the_width() {
+        let text = "t=   42.58 s  changed  swash2 (ch 2)  loss_of_effectiveness  gamma 0.80 [0.35, 1.24]  (since t=42.02 s the data fit a gain of 0.59 best, clearly; µs ≥ 20)";
+        for width in [8, 13, 40, 97] {
+            let lines = wrap(text, width);
+            assert!(
+                lines.iter().all(|l| l.chars().count() <= width),
+                "{width}: {lines:?}"
+            );
+            assert!(lines[1..].iter().all(|l| l.starts_with("  ")), "{lines:?}");
+            // Nothing lost: the same characters apart from the breaks and indents.
+            let squeeze = |s: &str| s.split_whitespace().collect::<String>();
+            assert_eq!(squeeze(&lines.concat()), squeeze(text), "{width}");
+        }
+        assert_eq!(wrap(text, 400), vec![text.to_string()]);
+        assert_eq!(wrap("", 40), vec![String::new()]);
     }
 }

@@ -299,7 +299,17 @@ impl MonitorFiles {
 
 /// One line for a person: `t=112.90 s sysid 1 fault motor1 (ch 1) loss_of_effectiveness ...`.
 pub fn describe(d: &Decision) -> String {
-    let mut s = format!("t={:8.2} s  sysid {}  {}", d.t, d.sysid, d.event.as_str());
+    describe_with(d, true)
+}
+
+/// `describe`, leaving out the system id where the reader knows the vehicle (a dashboard
+/// showing one).
+pub fn describe_with(d: &Decision, sysid: bool) -> String {
+    let mut s = format!("t={:8.2} s", d.t);
+    if sysid {
+        s += &format!("  sysid {}", d.sysid);
+    }
+    s += &format!("  {}", d.event.as_str());
     if let Some(a) = &d.actuator {
         s += &format!("  {a}");
         if let Some(c) = d.channel {
