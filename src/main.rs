@@ -937,7 +937,7 @@ fn monitor(
         // Restore the terminal before anything is printed.
         drop(ui);
         let counters = counters?;
-        for note in &counters.unsaid_notes {
+        for note in &counters.notes_to_say() {
             eprintln!("monitor: {note}");
         }
         if let Some(h) = sim {
@@ -1008,11 +1008,24 @@ fn calibrate(
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
     // Echoed: the pipeline's progress and warnings (a short stretch, a poor fit, a profile of
-    // another kind, outputs without PWM) concern the profile written. No decision comes before
-    // the calibration, where this stops.
+    // another kind, outputs without PWM) concern the profile written. Its vehicle makes no
+    // decision before its calibration, where this stops; with several vehicles, another one
+    // may have (--sysid runs only the one).
     let mut files = MonitorFiles::new(None, None, 1)?;
     let mut found = None;
+    // Systems whose attitude the log holds: the vehicles a --sysid could name.
+    let mut vehicles = std::collections::BTreeSet::new();
+    let mut note_vehicle = |frame: &ahcmon::link::Frame| {
+        if matches!(frame.msg, ahcmon::link::MavMessage::ATTITUDE(_)) {
+            vehicles.insert(frame.sysid);
+        }
+    };
     while let Some((_, frame)) = reader.next_frame().map_err(input_error)? {
+        note_vehicle(&frame);
+        // Another vehicle's frames would run its whole pipeline, decisions and all.
+        if only.is_some_and(|s| s != frame.sysid) {
+            continue;
+        }
         monitor.on_frame(&frame, &mut files);
         if let Some((sysid, p)) = monitor
             .pipelines
@@ -1026,14 +1039,12 @@ fn calibrate(
     if let Some((chosen, ..)) = &found
         && only.is_none()
     {
-        // Read on (quietly) only to learn which other vehicles the log holds.
-        files.echo = false;
+        // Read on, decoding only, to learn which other vehicles the log holds.
         while let Ok(Some((_, frame))) = reader.next_frame() {
-            monitor.on_frame(&frame, &mut files);
+            note_vehicle(&frame);
         }
-        let others: Vec<String> = monitor
-            .pipelines
-            .keys()
+        let others: Vec<String> = vehicles
+            .iter()
             .filter(|id| *id != chosen)
             .map(|id| id.to_string())
             .collect();
@@ -1063,9 +1074,9 @@ fn calibrate(
             })
             .collect();
         let why = if let (true, Some(id)) = (reasons.is_empty(), only) {
-            let ids: Vec<String> = monitor.pipelines.keys().map(|i| i.to_string()).collect();
+            let ids: Vec<String> = vehicles.iter().map(|i| i.to_string()).collect();
             format!(
-                "no vehicle with sysid {id} (vehicles with rates and outputs: {})",
+                "no vehicle with sysid {id} (systems sending ATTITUDE: {})",
                 if ids.is_empty() {
                     "none".into()
                 } else {

@@ -155,6 +155,8 @@ pub struct FlightGate {
     pub max_rel_alt_armed: Option<f64>,
     /// Longest stretch taken as airborne (s); 0 if never.
     pub longest_airborne_s: f64,
+    /// Samples taken as airborne.
+    pub airborne_samples: u64,
 }
 
 /// Counters of the pipeline itself.
@@ -345,7 +347,8 @@ impl VehiclePipeline {
             Stage::Grounded => airborne > 0.0,
             _ => false,
         };
-        if unusable && self.counters.missing_output > 0 {
+        // Most of them (one glitch in a flight is not the cause).
+        if unusable && 2 * self.counters.missing_output >= self.gate.airborne_samples.max(1) {
             return Some(format!(
                 "airborne for {airborne:.1} s, but {} samples were dropped for an output channel without a pulse width (said above): the profile has outputs this vehicle does not drive",
                 self.counters.missing_output
@@ -506,10 +509,12 @@ impl VehiclePipeline {
         if let Some(h) = s.rel_alt {
             g.max_rel_alt_armed = Some(g.max_rel_alt_armed.map_or(h, |m: f64| m.max(h)));
         }
-        match s.rel_alt {
+        let airborne = match s.rel_alt {
             Some(h) => h > self.cfg.airborne_alt_m,
             None => s.t - since >= self.cfg.armed_airborne_s,
-        }
+        };
+        g.airborne_samples += u64::from(airborne);
+        airborne
     }
 
     /// The profile's actuators' commands, normalised; Err(index of the first actuator whose

@@ -120,7 +120,15 @@ fn key_line(text: &str, message: &str) -> Option<usize> {
         return None;
     }
     let mut table = String::new();
+    // Inside a multi-line string (its delimiter): its lines are text, not keys or headers.
+    let mut open: Option<&str> = None;
     for (i, line) in text.lines().enumerate() {
+        if let Some(delim) = open {
+            if line.matches(delim).count() % 2 == 1 {
+                open = None;
+            }
+            continue;
+        }
         let line = line.trim();
         if let Some(header) = line.strip_prefix('[') {
             if header.starts_with('[') {
@@ -128,11 +136,17 @@ fn key_line(text: &str, message: &str) -> Option<usize> {
                 table = "\u{0}".into();
                 continue;
             }
-            table = header.trim_end_matches(']').trim().to_string();
+            // Up to the closing bracket (a comment may follow).
+            table = header
+                .split(']')
+                .next()
+                .unwrap_or_default()
+                .trim()
+                .to_string();
             if table == key {
                 return Some(i + 1);
             }
-        } else if let Some((k, _)) = line.split_once('=') {
+        } else if let Some((k, value)) = line.split_once('=') {
             let k = k.trim();
             let full = if table.is_empty() {
                 k.to_string()
@@ -142,6 +156,9 @@ fn key_line(text: &str, message: &str) -> Option<usize> {
             if full == key {
                 return Some(i + 1);
             }
+            open = ["\"\"\"", "'''"]
+                .into_iter()
+                .find(|d| value.matches(d).count() % 2 == 1);
         }
     }
     None
@@ -222,5 +239,9 @@ mod tests {
         assert_eq!(key_line(text, "noise.az must be positive"), None);
         assert_eq!(key_line(text, "fault.gyro must be positive"), None);
         assert_eq!(key_line(text, "the actuators overlap"), None);
+        // Not inside a multi-line string; a header may carry a comment.
+        let text = "description = \"\"\"\nrate_hz = 50 on the bench\n[noise]\n\"\"\"\nrate_hz = -1\n[noise] # levels\ngyro = nan\n";
+        assert_eq!(key_line(text, "rate_hz must be positive"), Some(5));
+        assert_eq!(key_line(text, "noise.gyro must be positive"), Some(7));
     }
 }

@@ -774,7 +774,7 @@ fn calibrate_says_what_concerns_the_profile_it_writes() {
     let (code, _, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o, "--sysid", "7"]);
     assert_eq!(code, 2, "{err}");
     assert!(
-        err.contains("no vehicle with sysid 7 (vehicles with rates and outputs: 1, 2)"),
+        err.contains("no vehicle with sysid 7 (systems sending ATTITUDE: 1, 2)"),
         "{err}"
     );
 }

@@ -1201,6 +1201,13 @@ impl Diagnoser {
             } else {
                 (FaultClass::Unclassified, false)
             };
+            // The fallback's class from a MIT-UKF still within the tolerances (the MIT-ESMF
+            // alarmed first) is the sign of noise: the TradHeli SITL servo 3 gain loss read
+            // "bias, gamma 1.00, delta +0.000". No class is taken from it.
+            let e = self.actuators[j].channels[0].last;
+            let unmoved = mixed
+                && (e.gamma - 1.0).abs() < self.params.loe_tau
+                && self.actuators[j].channels[0].e.abs() < self.params.threshold;
             let st = &self.actuators[j];
             match (st.active, class) {
                 (None, _) if self.held_for_the_data(j, filters, t) => {}
@@ -1211,13 +1218,6 @@ impl Diagnoser {
                     // decisions read so were wrong). Say the output is off and let the class
                     // follow.
                     let pending = c == FaultClass::Stuck && self.data_class(j).is_none();
-                    // The fallback's class from a MIT-UKF still within the tolerances (the
-                    // MIT-ESMF alarmed first) is the sign of noise: the TradHeli SITL servo 3
-                    // gain loss read "bias, gamma 1.00, delta +0.000".
-                    let e = self.actuators[j].channels[0].last;
-                    let unmoved = mixed
-                        && (e.gamma - 1.0).abs() < self.params.loe_tau
-                        && self.actuators[j].channels[0].e.abs() < self.params.threshold;
                     let c = if pending || unmoved {
                         FaultClass::Unclassified
                     } else {
@@ -1305,6 +1305,7 @@ impl Diagnoser {
                     // servo 1 hover read stuck for 3 s, the data an offset (with a gain).
                     let swinging = c == FaultClass::Stuck && self.data_read_unstuck(j);
                     let mut c = if c == FaultClass::Unclassified
+                        || unmoved
                         || ukf_warming
                         || still_stuck
                         || back

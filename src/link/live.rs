@@ -45,8 +45,41 @@ pub struct LiveCounters {
     /// Frames dropped because the estimating side fell behind (channel full).
     pub backpressure_drops: u64,
     /// The connection's notes (see [`super::conn::Received::Note`]) that the dashboard kept
-    /// from being said: the caller says them once the terminal is restored.
+    /// from being said: the caller says them once the terminal is restored. The first and the
+    /// last `KEPT_NOTES` only (a flapping peer says two a second for as long as it runs).
     pub unsaid_notes: Vec<String>,
+    unsaid_last: std::collections::VecDeque<String>,
+    unsaid_skipped: u64,
+}
+
+/// How many of the first and of the last unsaid notes are kept.
+const KEPT_NOTES: usize = 20;
+
+impl LiveCounters {
+    fn keep_note(&mut self, note: String) {
+        if self.unsaid_notes.len() < KEPT_NOTES {
+            self.unsaid_notes.push(note);
+            return;
+        }
+        self.unsaid_last.push_back(note);
+        if self.unsaid_last.len() > KEPT_NOTES {
+            self.unsaid_last.pop_front();
+            self.unsaid_skipped += 1;
+        }
+    }
+
+    /// The notes to say after the dashboard: the first, how many were left out, the last.
+    pub fn notes_to_say(&self) -> Vec<String> {
+        let mut out = self.unsaid_notes.clone();
+        if self.unsaid_skipped > 0 {
+            out.push(format!(
+                "({} more notes like these, not repeated)",
+                self.unsaid_skipped
+            ));
+        }
+        out.extend(self.unsaid_last.iter().cloned());
+        out
+    }
 }
 
 /// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
@@ -87,7 +120,7 @@ pub async fn run(
                         if say_notes {
                             eprintln!("monitor: {note}");
                         } else if let Ok(mut c) = reader_counters.lock() {
-                            c.unsaid_notes.push(note);
+                            c.keep_note(note);
                         }
                     }
                     Ok(super::conn::Received::Frame(frame)) => {
@@ -536,6 +569,26 @@ mod tests {
             msg_id: mavlink_core::Message::message_id(&msg),
             msg,
         }
+    }
+
+    /// Under the dashboard a flapping peer's notes are kept first and last, the rest counted.
+    #[test]
+    fn unsaid_notes_keep_the_first_and_the_last() {
+        let mut c = LiveCounters::default();
+        for k in 0..1000 {
+            c.keep_note(format!("note {k}"));
+        }
+        let said = c.notes_to_say();
+        assert_eq!(said.len(), 2 * KEPT_NOTES + 1, "{said:?}");
+        assert_eq!(said[0], "note 0");
+        assert_eq!(
+            said[KEPT_NOTES],
+            "(960 more notes like these, not repeated)"
+        );
+        assert_eq!(said.last().map(String::as_str), Some("note 999"));
+        let mut few = LiveCounters::default();
+        few.keep_note("only".into());
+        assert_eq!(few.notes_to_say(), vec!["only".to_string()]);
     }
 
     #[test]

@@ -63,7 +63,7 @@ pub struct Alerts {
     latest: BTreeMap<(u8, String), Latest>,
     /// Per vehicle the actuator names of its profile and their NAMED_VALUE_FLOAT names (see
     /// [`value_names`]), in profile order.
-    value_names: BTreeMap<u8, (Vec<String>, Vec<[String; 2]>)>,
+    value_names: BTreeMap<u8, (Vec<NamedChannel>, Vec<[String; 2]>)>,
     state: BTreeMap<(u8, String), AhcState>,
     last_values: f64,
     /// The last text queued about each actuator (an actuator's newest is never dropped from
@@ -143,6 +143,9 @@ fn cut_bytes(s: &str, max: usize) -> &str {
 fn short_name(prefix: &str, name: &str) -> String {
     cut_bytes(&format!("{prefix}_{name}"), 10).to_string()
 }
+
+/// An actuator's name and output channel.
+type NamedChannel = (String, u8);
 
 /// Each actuator's NAMED_VALUE_FLOAT names, `[gamma, delta]`: [`short_name`]s, or when two of
 /// a vehicle's cut names would be the same (`esc_motor_1`, `esc_motor_2`), `g_ch<channel>`
@@ -265,14 +268,26 @@ impl Alerts {
     ) {
         self.see(sysid);
         // Made again only when the profile's actuators change (a reboot, another profile).
-        let known = self
-            .value_names
-            .get(&sysid)
-            .is_some_and(|(names, _)| names.iter().eq(profile.actuators.iter().map(|a| &a.name)));
+        let known = self.value_names.get(&sysid).is_some_and(|(names, _)| {
+            names
+                .iter()
+                .map(|(n, c)| (n, *c))
+                .eq(profile.actuators.iter().map(|a| (&a.name, a.channel)))
+        });
         if !known {
-            let names = profile.actuators.iter().map(|a| a.name.clone()).collect();
+            let names = profile
+                .actuators
+                .iter()
+                .map(|a| (a.name.clone(), a.channel))
+                .collect();
             self.value_names
                 .insert(sysid, (names, value_names(profile)));
+            // The old profile's actuators would go on being sent under the new names (their
+            // index); the states of actuators it no longer has would never change again.
+            self.latest.retain(|(id, _), _| *id != sysid);
+            self.state.retain(|(id, name), _| {
+                *id != sysid || profile.actuators.iter().any(|a| &a.name == name)
+            });
         }
         for (j, a) in profile.actuators.iter().enumerate() {
             self.latest.insert(
@@ -458,6 +473,25 @@ mod tests {
             }
         }
         assert_eq!(sent.len(), 8, "{sent:?}");
+        // The vehicle's profile changes (a reboot as another frame): only the new actuators'
+        // values are sent, each under its own name (the old ones went on under new names).
+        let hexa = Profile::resolve("hexa-x").unwrap();
+        let est6 = [AhcEstimate::default(); 6];
+        a.on_estimates(2.0, 1, &[&est6, &est6], &hexa);
+        a.outbox.clear();
+        a.tick(2.0);
+        let mut count = std::collections::BTreeMap::new();
+        for frame in &a.outbox {
+            if let Parsed::Frame(f, _) = parse(frame)
+                && let MavMessage::NAMED_VALUE_FLOAT(m) = f.msg
+            {
+                let name = m.name.to_str().unwrap().trim_end_matches('\0').to_string();
+                *count.entry(name).or_insert(0) += 1;
+            }
+        }
+        assert_eq!(count.len(), 12, "{count:?}");
+        assert!(count.values().all(|n| *n == 1), "{count:?}");
+        assert!(count.contains_key("g_motor6"), "{count:?}");
     }
 
     /// A decision about `actuator` of vehicle 1, as the diagnosis makes them.
