@@ -1332,6 +1332,31 @@ fn a_reboot_with_a_fault_in_force_is_said_and_the_summary_keeps_the_fault() {
     assert_eq!(code, 0, "{err}");
     let all = format!("{out}{err}");
     told_the_reboot(&all);
+    // A new boot whose own motor 2 fault comes and goes: its clearing is said, with the old
+    // boot's fault (it read "healthy since the reboot").
+    let scenario = dir.join("comes-and-goes.toml");
+    let text = include_str!("../replay/scenarios/quad-x-motor2-loe-live.toml");
+    std::fs::write(
+        &scenario,
+        text.replace("gamma = 0.7", "gamma = 0.7\nuntil = 45.0"),
+    )
+    .unwrap();
+    let third = dir.join("third.tlog");
+    sim_tlog(scenario.to_str().unwrap(), &third, &["--seed", "2"]);
+    let mut log = std::fs::read(&first).unwrap();
+    log.extend_from_slice(&std::fs::read(&third).unwrap());
+    std::fs::write(&both, log).unwrap();
+    let (code, out, err) = ahcmon(&["replay", both.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    let motor2 = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("motor2"))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(motor2.contains("  cleared at t="), "{motor2}");
+    assert!(
+        motor2.ends_with(" s (loss_of_effectiveness before the reboot)"),
+        "{motor2}"
+    );
 }
 
 /// A vehicle that sends outputs but no ATTITUDE is told which half is missing.
