@@ -710,37 +710,22 @@ fn calibrate_says_what_concerns_the_profile_it_writes() {
     let dir = common::temp_dir("cli_calibrate_says");
     let p = dir.join("p.toml");
     let o = p.to_str().unwrap();
-    let (code, _, err) = ahcmon(&["calibrate", l, "--until", "80", "-o", o]);
+    let calibrate = |log: &str, until: &str, extra: &[&str]| {
+        ahcmon(&[&["calibrate", log, "--until", until, "-o", o], extra].concat())
+    };
+    let (code, _, err) = calibrate(l, "80", &[]);
     assert_eq!(code, 0, "{err}");
     assert!(
         err.contains("warning: the calibration stretch is only"),
         "{err}"
     );
-    let (code, _, err) = ahcmon(&[
-        "calibrate",
-        l,
-        "--until",
-        "120",
-        "-o",
-        o,
-        "--profile",
-        "heli-h3-120",
-    ]);
+    let (code, _, err) = calibrate(l, "120", &["--profile", "heli-h3-120"]);
     assert_eq!(code, 0, "{err}");
     assert!(
         err.contains("warning: the profile heli-h3-120 is for a helicopter"),
         "{err}"
     );
-    let (code, _, err) = ahcmon(&[
-        "calibrate",
-        l,
-        "--until",
-        "120",
-        "-o",
-        o,
-        "--profile",
-        "hexa-x",
-    ]);
+    let (code, _, err) = calibrate(l, "120", &["--profile", "hexa-x"]);
     assert_eq!(code, 2, "{err}");
     let last = err.trim_end().lines().last().unwrap_or_default();
     assert!(
@@ -759,19 +744,19 @@ fn calibrate_says_what_concerns_the_profile_it_writes() {
     }
     w.flush().unwrap();
     let t = two.to_str().unwrap();
-    let (code, _, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o]);
+    let (code, _, err) = calibrate(t, "120", &[]);
     assert_eq!(code, 0, "{err}");
     assert!(
         err.contains("the log also holds sysid 2: calibrating sysid 1"),
         "{err}"
     );
-    let (code, out, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o, "--sysid", "2"]);
+    let (code, out, err) = calibrate(t, "120", &["--sysid", "2"]);
     assert_eq!(code, 0, "{err}");
     assert!(
         out.contains("(sysid 2)") && !err.contains("also holds"),
         "{out}{err}"
     );
-    let (code, _, err) = ahcmon(&["calibrate", t, "--until", "120", "-o", o, "--sysid", "7"]);
+    let (code, _, err) = calibrate(t, "120", &["--sysid", "7"]);
     assert_eq!(code, 2, "{err}");
     assert!(
         err.contains("no vehicle with sysid 7 (systems sending ATTITUDE: 1, 2)"),

@@ -151,9 +151,11 @@ pub fn render(
                 (None, Some(c), Some(_)) => {
                     format!("{} at the reboot, not judged since", c.as_str())
                 }
-                (None, Some(c), None) => {
-                    format!("healthy since the reboot ({} before)", c.as_str())
-                }
+                // (A clearing after a fault at the reboot is the new boot's own.)
+                (None, Some(c), None) => match &cleared {
+                    Some(cl) => format!("{cl} ({} before the reboot)", c.as_str()),
+                    None => format!("healthy since the reboot ({} before)", c.as_str()),
+                },
                 (None, None, _) => cleared.unwrap_or_else(|| "healthy".into()),
             };
             for (f, name) in FILTER_NAMES.iter().enumerate() {
