@@ -160,6 +160,22 @@ fn the_header_carries_the_demo_script() {
     assert!(header.contains("sysid 1 helicopter"), "{header}");
     assert!(header.contains("swash2 gain 0.6 at t=42 s"), "{header}");
     assert!(header.contains("tail bias +0.15 at t=55 s"), "{header}");
+    // At 100 columns it takes a second line (it was cut after "tail bias").
+    let mut term = Terminal::new(TestBackend::new(100, 32)).unwrap();
+    term.draw(|f| render(f, &m, &d, &hist, &ui, &LinkInfo::default()))
+        .unwrap();
+    let buf = term.backend().buffer().clone();
+    let two: String = (0..2)
+        .map(|y| (0..100).map(|x| buf[(x, y)].symbol()).collect::<String>())
+        .collect::<Vec<_>>()
+        .join(" ")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(two.contains("sysid 1 helicopter"), "{two}");
+    assert!(two.contains("tail bias +0.15 at t=55 s"), "{two}");
+    let third: String = (0..100).map(|x| buf[(x, 2)].symbol().to_string()).collect();
+    assert!(third.starts_with("┌ actuators"), "{third}");
 }
 
 #[test]

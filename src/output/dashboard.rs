@@ -15,7 +15,7 @@ use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{
-    Axis, Block, Borders, Chart, Clear, Dataset, GraphType, Paragraph, Row, Table,
+    Axis, Block, Borders, Chart, Clear, Dataset, GraphType, Paragraph, Row, Table, Wrap,
 };
 use std::collections::{BTreeMap, VecDeque};
 
@@ -179,10 +179,18 @@ pub fn render(
     let sysid = selected_sysid(monitor, ui);
     // On a short terminal the chart gives way first, then the decisions: the header, the
     // actuators and the footer stay (at 60x15 the table had no rows left).
+    // The header wraps onto a second line where it does not fit (the demo's script was cut
+    // at 100 columns) and the terminal has rows to spare.
+    let header = Line::from(header_spans(monitor, &sysids, sysid, ui));
+    let header_h: u16 = if header.width() > usize::from(area.width) && area.height >= 24 {
+        2
+    } else {
+        1
+    };
     let table = table_height(monitor, sysid);
     // Four rows inside: the newest decision wrapped on up to three, one for the one before.
     let list = if area.height >= 40 { 10 } else { 6 };
-    let spare = area.height.saturating_sub(2 + table);
+    let spare = area.height.saturating_sub(header_h + 1 + table);
     let (chart_min, list) = if spare >= list + 6 {
         (6, list)
     } else {
@@ -191,14 +199,14 @@ pub fn render(
     let rows = Layout::default()
         .direction(Direction::Vertical)
         .constraints([
-            Constraint::Length(1),
+            Constraint::Length(header_h),
             Constraint::Length(table),
             Constraint::Min(chart_min),
             Constraint::Length(list),
             Constraint::Length(1),
         ])
         .split(area);
-    header(f, rows[0], monitor, &sysids, sysid, ui);
+    f.render_widget(Paragraph::new(header).wrap(Wrap { trim: false }), rows[0]);
     actuator_table(f, rows[1], monitor, decisions, sysid, ui);
     chart(f, rows[2], monitor, history, sysid, ui);
     decision_list(f, rows[3], decisions, sysid);
@@ -222,14 +230,12 @@ fn table_height(monitor: &Monitor, sysid: Option<u8>) -> u16 {
     (n as u16 + 3).min(MAX_ACTUATORS as u16 + 3)
 }
 
-fn header(
-    f: &mut Frame,
-    area: Rect,
+fn header_spans(
     monitor: &Monitor,
     sysids: &[u8],
     sysid: Option<u8>,
     ui: &UiState,
-) {
+) -> Vec<Span<'static>> {
     let mut spans = vec![Span::styled(
         " ahcmon ",
         Style::default().fg(Color::Black).bg(Color::Cyan),
@@ -268,7 +274,7 @@ fn header(
             Style::default().fg(Color::DarkGray),
         ));
     }
-    f.render_widget(Paragraph::new(Line::from(spans)), area);
+    spans
 }
 
 fn actuator_table(
