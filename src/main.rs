@@ -971,6 +971,13 @@ fn monitor(
             counters.backpressure_drops
         );
     }
+    if counters.own_echo > 0 {
+        outln!(
+            "{} of our own alert frames (component {}) came back in on the vehicle link and were ignored: the forwarder sends our alerts back to us (harmless)",
+            counters.own_echo,
+            ahcmon::output::alerts::ALERT_COMPID
+        );
+    }
     if let Some(a) = &files.alerts {
         outln!(
             "alerts: {} STATUSTEXT queued for sending, {} dropped by the rate limit, {} not repeated (the planner's last text on that actuator already said it); {} frames found no planner to send to (none connected yet, or the link failed; a udpout target that is not listening cannot be told apart from one that is)",

@@ -347,6 +347,89 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
     );
 }
 
+/// The README's MAVProxy set-up: the vehicle and our alerts both masters of MAVProxy, whose
+/// --out feeds the monitor. MAVProxy sends the alerts back in under the vehicle's system id;
+/// they kept a vehicle that had gone silent "alive" (no link_lost, --exit-idle never fired).
+#[test]
+fn our_alerts_echoed_back_by_mavproxy_do_not_hide_a_lost_vehicle() {
+    let py = common::python();
+    let mavproxy = py.with_file_name("mavproxy.py");
+    assert!(mavproxy.exists(), "{} missing", mavproxy.display());
+    let (vehicle_in, alerts_in, monitor_in) = (free_udp_port(), free_udp_port(), free_udp_port());
+    let dir = common::temp_dir("live_mavproxy_echo");
+    let mut proxy = Command::new(&py)
+        .arg(&mavproxy)
+        .arg(format!("--master=udpin:127.0.0.1:{vehicle_in}"))
+        .arg(format!("--master=udpin:127.0.0.1:{alerts_in}"))
+        .arg(format!("--out=udpout:127.0.0.1:{monitor_in}"))
+        .arg("--non-interactive")
+        .arg(format!("--state-basedir={}", dir.display()))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(5));
+    let file = dir.join("d.jsonl");
+    let mut monitor = Command::new(bin())
+        .args([
+            "monitor",
+            &format!("udpin:127.0.0.1:{monitor_in}"),
+            "--headless",
+        ])
+        .args(["--alerts", &format!("udpout:127.0.0.1:{alerts_in}")])
+        .args(["--exit-idle", "3", "--decisions"])
+        .arg(&file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let sim = Command::new(bin())
+        .args([
+            "sim",
+            "--scenario",
+            "quad-x-motor2-loe-live",
+            "--speed",
+            "4",
+        ])
+        .args(["--out", &format!("udpout:127.0.0.1:{vehicle_in}")])
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    // The vehicle is silent now: link_lost after 2 s, and --exit-idle 3 ends the monitor.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while monitor.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            monitor.kill().ok();
+            let _ = proxy.kill();
+            panic!(
+                "the monitor did not see the vehicle go: {:?}",
+                decisions(&file)
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let _ = proxy.kill();
+    let _ = proxy.wait();
+    let out = monitor.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}");
+    let ds = decisions(&file);
+    assert!(ds.iter().any(|d| d["event"] == "link_lost"), "{ds:?}");
+    assert!(
+        !faults(&ds, 1).is_empty(),
+        "the vehicle was watched: {ds:?}"
+    );
+    assert!(
+        stdout.contains("of our own alert frames (component 191) came back"),
+        "{stdout}"
+    );
+}
+
 /// The monitor on udpin beside a stand-in autopilot; returns what the autopilot received and
 /// the monitor's stderr.
 fn vehicle_hears(extra: &[&str]) -> (Value, String) {

@@ -53,9 +53,17 @@ const KINDS: [&str; 8] = [
 /// file or directory", named no device).
 fn opening(spec: &ConnSpec, what: String) -> impl Fn(std::io::Error) -> ConnError {
     let spec = spec.to_string();
-    move |source| ConnError::Io {
-        spec: spec.clone(),
-        source: std::io::Error::new(source.kind(), format!("{what}: {source}")),
+    move |source| {
+        // A port taken is most often a ground station on its default port (14550).
+        let hint = if source.kind() == std::io::ErrorKind::AddrInUse {
+            "; another program (a ground station?) listens there: listen on a free port and have it forward to that one (MAVProxy --out=udp:127.0.0.1:PORT, or the ground station's MAVLink forwarding)"
+        } else {
+            ""
+        };
+        ConnError::Io {
+            spec: spec.clone(),
+            source: std::io::Error::new(source.kind(), format!("{what}: {source}{hint}")),
+        }
     }
 }
 
@@ -579,6 +587,25 @@ mod tests {
             // Other links never wait for a connection.
             let udp: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
             assert_eq!(Link::open(udp).await.expect("binds").not_connected(), None);
+        });
+    }
+
+    /// A UDP port already taken (a ground station on 14550) says what to do about it.
+    #[test]
+    fn a_taken_port_says_how_to_share_the_stream() {
+        let taken = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+        let addr = taken.local_addr().expect("addr");
+        runtime().block_on(async {
+            let spec: ConnSpec = format!("udpin:{addr}").parse().expect("spec");
+            let Err(e) = Link::open(spec).await else {
+                panic!("a second socket bound {addr}");
+            };
+            let msg = format!("{e:#}");
+            assert!(msg.contains("in use"), "{msg}");
+            assert!(
+                msg.contains("listen on a free port and have it forward"),
+                "{msg}"
+            );
         });
     }
 

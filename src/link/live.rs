@@ -50,6 +50,9 @@ pub struct LiveCounters {
     pub unsaid_notes: Vec<String>,
     unsaid_last: std::collections::VecDeque<String>,
     unsaid_skipped: u64,
+    /// Our own alert frames (component `ALERT_COMPID`) that came back in, ignored: a forwarder
+    /// such as MAVProxy sends what one link gives it to its other links.
+    pub own_echo: u64,
 }
 
 /// How many of the first and of the last unsaid notes are kept.
@@ -150,6 +153,7 @@ pub async fn run(
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
+    let mut own_echo = 0u64;
     let mut silence_told = false;
     let mut rates = RateRequests::default();
     // 10 Hz: link-loss checks, alerts and the dashboard's redraw.
@@ -173,6 +177,12 @@ pub async fn run(
         tokio::select! {
             frame = rx.recv() => {
                 let Some(frame) = frame else { break };
+                // Our own alerts, echoed back in under the vehicle's system id, would keep a
+                // vehicle that has gone silent "alive" (no link_lost, no --exit-idle).
+                if sink.alerts.is_some() && frame.compid == crate::output::alerts::ALERT_COMPID {
+                    own_echo += 1;
+                    continue;
+                }
                 let now = Instant::now();
                 any_frame = Some(now);
                 if frame.sysid != 255 && frame.sysid != 0 {
@@ -258,12 +268,16 @@ pub async fn run(
     monitor.finish(sink);
     let result = tokio::time::timeout(Duration::from_secs(1), done_rx).await;
     reader.abort();
-    match result {
+    let result = match result {
         Ok(Ok(r)) => r,
         // The reader is stuck (e.g. a tcpin send waiting for a client): its counters as of
         // its last frame, not zeros.
         _ => Ok(live_counters.lock().map(|c| c.clone()).unwrap_or_default()),
-    }
+    };
+    result.map(|mut c| {
+        c.own_echo = own_echo;
+        c
+    })
 }
 
 /// The messages the estimators need, by id: ATTITUDE, SERVO_OUTPUT_RAW and the a_z source the

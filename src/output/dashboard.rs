@@ -300,7 +300,10 @@ fn actuator_table(
             Some((done, None)) => format!("calibrating on healthy flight: {done:.1} s so far"),
             None => format!("{} …", p.stage_name()),
         };
-        f.render_widget(Paragraph::new(text).block(block), area);
+        f.render_widget(
+            Paragraph::new(text).wrap(Wrap { trim: true }).block(block),
+            area,
+        );
         return;
     };
     // Bar width from the space left after the fixed columns.
