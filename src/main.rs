@@ -980,8 +980,9 @@ fn monitor(
     }
     if let Some(a) = &files.alerts {
         outln!(
-            "alerts: {} STATUSTEXT queued for sending, {} dropped by the rate limit, {} not repeated (the planner's last text on that actuator already said it); {} frames found no planner to send to (none connected yet, or the link failed; a udpout target that is not listening cannot be told apart from one that is)",
+            "alerts: {} STATUSTEXT queued for sending ({} of them a loss told again at its new size), {} dropped by the rate limit, {} not repeated (the planner's last text on that actuator already said it); {} frames found no planner to send to (none connected yet, or the link failed; a udpout target that is not listening cannot be told apart from one that is)",
             a.texts_sent,
+            a.texts_resized,
             a.texts_dropped,
             a.texts_repeated,
             a.frames_unsent

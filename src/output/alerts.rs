@@ -30,6 +30,12 @@ const TEXT_QUEUE_HARD: usize = 64;
 const TEXT_BYTES: usize = 50;
 /// NAMED_VALUE_FLOAT and AHC_ESTIMATE per actuator this often (s).
 const VALUE_INTERVAL_S: f64 = 0.5;
+/// A loss's size is said again when the MIT-UKF's estimate is this many percentage points
+/// from the last text, at most once per `LOSS_RESAY_S` per actuator: the first text comes at
+/// the alarm, while the estimate is still on its way (the demo's 40 % swash loss was told as
+/// 16 %, then 20 %, and its 31 % never).
+const LOSS_RESAY_POINTS: f64 = 10.0;
+const LOSS_RESAY_S: f64 = 5.0;
 
 #[derive(Debug, Clone, Copy)]
 struct Latest {
@@ -69,6 +75,11 @@ pub struct Alerts {
     /// The last text queued about each actuator (an actuator's newest is never dropped from
     /// the queue; whether the link delivered it, UDP cannot say).
     last_said: BTreeMap<(u8, String), (u8, String)>,
+    /// Per actuator with a loss in force, the decision whose text last said its size: said
+    /// again when the MIT-UKF's estimate has moved far from it (see `LOSS_RESAY_POINTS`).
+    loss_said: BTreeMap<(u8, String), Decision>,
+    /// STATUSTEXT of a loss said again at its new size.
+    pub texts_resized: u64,
     /// STATUSTEXT dropped because the queue was full.
     pub texts_dropped: u64,
     /// STATUSTEXT of `changed` decisions not queued because the last text queued about that
@@ -210,6 +221,15 @@ impl Alerts {
         if let (Some(a), Some(s)) = (&d.actuator, state_of(d)) {
             self.state.insert((d.sysid, a.clone()), s);
         }
+        if let Some(a) = &d.actuator {
+            let loss = matches!(d.event, Event::Fault | Event::Changed)
+                && d.class == Some(FaultClass::LossOfEffectiveness);
+            if loss {
+                self.loss_said.insert((d.sysid, a.clone()), d.clone());
+            } else if d.event != Event::ExcitationLow {
+                self.loss_said.remove(&(d.sysid, a.clone()));
+            }
+        }
         if let Some((severity, text)) = statustext(d) {
             if let Some(a) = &d.actuator {
                 let said = (severity as u8, text.clone());
@@ -285,11 +305,26 @@ impl Alerts {
             // The old profile's actuators would go on being sent under the new names (their
             // index); the states of actuators it no longer has would never change again.
             self.latest.retain(|(id, _), _| *id != sysid);
-            self.state.retain(|(id, name), _| {
+            let kept = |(id, name): &(u8, String)| {
                 *id != sysid || profile.actuators.iter().any(|a| &a.name == name)
-            });
+            };
+            self.state.retain(|k, _| kept(k));
+            self.loss_said.retain(|k, _| kept(k));
         }
         for (j, a) in profile.actuators.iter().enumerate() {
+            let key = (sysid, a.name.clone());
+            if let Some(said) = self.loss_said.get(&key) {
+                let points = |g: f64| (1.0 - g) * 100.0;
+                let moved = (points(est[0][j].gamma) - points(said.gamma.unwrap_or(1.0))).abs();
+                if moved >= LOSS_RESAY_POINTS && t - said.t >= LOSS_RESAY_S {
+                    let mut d = said.clone();
+                    d.event = Event::Changed;
+                    d.t = t;
+                    d.gamma = Some(est[0][j].gamma);
+                    self.texts_resized += 1;
+                    self.on_decision(&d);
+                }
+            }
             self.latest.insert(
                 (sysid, a.name.clone()),
                 Latest {
@@ -492,6 +527,58 @@ mod tests {
         assert_eq!(count.len(), 12, "{count:?}");
         assert!(count.values().all(|n| *n == 1), "{count:?}");
         assert!(count.contains_key("g_motor6"), "{count:?}");
+    }
+
+    /// A loss told at the alarm is told again once the MIT-UKF's estimate has moved 10
+    /// percentage points from it (not sooner than 5 s after the last text); a cleared one no more.
+    #[test]
+    fn a_loss_is_told_again_at_its_new_size() {
+        let p = Profile::resolve("heli-h3-120").unwrap();
+        let mut a = Alerts::default();
+        let mut d = decision(
+            Event::Fault,
+            "swash2",
+            Some(FaultClass::LossOfEffectiveness),
+        );
+        d.t = 42.0;
+        d.gamma = Some(0.84);
+        a.on_decision(&d);
+        let mut est = [AhcEstimate::default(); 4];
+        for e in est.iter_mut() {
+            e.gamma = 1.0;
+        }
+        // Sent (the outbox) and then waiting (the queue), in order.
+        let texts = |a: &Alerts| -> Vec<String> {
+            use crate::link::frame::{Parsed, parse};
+            let sent = a.outbox.iter().filter_map(|f| match parse(f) {
+                Parsed::Frame(f, _) => match f.msg {
+                    MavMessage::STATUSTEXT(m) => {
+                        Some(m.text.to_str().unwrap().trim_end_matches('\0').to_string())
+                    }
+                    _ => None,
+                },
+                _ => None,
+            });
+            let queued = a.text_queue.values().flatten().map(|q| q.text.clone());
+            sent.chain(queued).collect()
+        };
+        assert_eq!(texts(&a), vec!["AHC swash2 LOE 16% UKF"]);
+        est[1].gamma = 0.69;
+        // Too soon after the last text: not yet.
+        a.on_estimates(45.0, 1, &[&est, &est], &p);
+        assert_eq!(texts(&a).len(), 1);
+        a.on_estimates(47.5, 1, &[&est, &est], &p);
+        assert_eq!(texts(&a)[1], "AHC swash2 LOE 31% UKF");
+        // Within 10 points of the new size: nothing more.
+        est[1].gamma = 0.62;
+        a.on_estimates(60.0, 1, &[&est, &est], &p);
+        assert_eq!(texts(&a).len(), 2);
+        assert_eq!(a.texts_resized, 1);
+        // Cleared: its size is not told again.
+        a.on_decision(&decision(Event::Cleared, "swash2", None));
+        est[1].gamma = 0.3;
+        a.on_estimates(70.0, 1, &[&est, &est], &p);
+        assert_eq!(texts(&a).len(), 3, "{:?}", texts(&a));
     }
 
     /// A decision about `actuator` of vehicle 1, as the diagnosis makes them.
