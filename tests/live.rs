@@ -296,8 +296,9 @@ fn demo_alerts_reach_a_pymavlink_listener() {
     assert!(names.iter().any(|n| n == "d_tail"), "{names:?}");
 }
 
-#[test]
-fn mavproxy_forwards_our_statustext_to_its_outputs() {
+/// MAVProxy (installed by .ci/run) listening on `masters` and sending to `out` (all on
+/// 127.0.0.1), its state in `dir`; returns once it has had time to start listening.
+fn mavproxy(masters: &[u16], out: u16, dir: &Path) -> std::process::Child {
     let py = common::python();
     let mavproxy = py.with_file_name("mavproxy.py");
     assert!(
@@ -305,16 +306,16 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
         "{} missing: `bash .ci/run` installs MAVProxy (pip --no-deps mavproxy==1.8.75 pyserial)",
         mavproxy.display()
     );
-    let (master, out_port) = (free_udp_port(), free_udp_port());
-    let state = common::temp_dir("live_mavproxy");
-    // The planner side: a pymavlink listener on MAVProxy's --out.
-    let listener = Listener::start(out_port, 60);
-    let mut proxy = Command::new(&py)
+    let proxy = Command::new(&py)
         .arg(&mavproxy)
-        .arg(format!("--master=udpin:127.0.0.1:{master}"))
-        .arg(format!("--out=udp:127.0.0.1:{out_port}"))
+        .args(
+            masters
+                .iter()
+                .map(|p| format!("--master=udpin:127.0.0.1:{p}")),
+        )
+        .arg(format!("--out=udp:127.0.0.1:{out}"))
         .arg("--non-interactive")
-        .arg(format!("--state-basedir={}", state.display()))
+        .arg(format!("--state-basedir={}", dir.display()))
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -322,6 +323,16 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
         .unwrap();
     // MAVProxy needs a few seconds to start listening.
     std::thread::sleep(std::time::Duration::from_secs(5));
+    proxy
+}
+
+#[test]
+fn mavproxy_forwards_our_statustext_to_its_outputs() {
+    let (master, out_port) = (free_udp_port(), free_udp_port());
+    let state = common::temp_dir("live_mavproxy");
+    // The planner side: a pymavlink listener on MAVProxy's --out.
+    let listener = Listener::start(out_port, 60);
+    let mut proxy = mavproxy(&[master], out_port, &state);
     let demo = Command::new(bin())
         .args(["demo", "--headless", "--speed", "4", "--alerts"])
         .arg(format!("udpout:127.0.0.1:{master}"))
@@ -352,24 +363,9 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
 /// they kept a vehicle that had gone silent "alive" (no link_lost, --exit-idle never fired).
 #[test]
 fn our_alerts_echoed_back_by_mavproxy_do_not_hide_a_lost_vehicle() {
-    let py = common::python();
-    let mavproxy = py.with_file_name("mavproxy.py");
-    assert!(mavproxy.exists(), "{} missing", mavproxy.display());
     let (vehicle_in, alerts_in, monitor_in) = (free_udp_port(), free_udp_port(), free_udp_port());
     let dir = common::temp_dir("live_mavproxy_echo");
-    let mut proxy = Command::new(&py)
-        .arg(&mavproxy)
-        .arg(format!("--master=udpin:127.0.0.1:{vehicle_in}"))
-        .arg(format!("--master=udpin:127.0.0.1:{alerts_in}"))
-        .arg(format!("--out=udpout:127.0.0.1:{monitor_in}"))
-        .arg("--non-interactive")
-        .arg(format!("--state-basedir={}", dir.display()))
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_secs(5));
+    let mut proxy = mavproxy(&[vehicle_in, alerts_in], monitor_in, &dir);
     let file = dir.join("d.jsonl");
     let mut monitor = Command::new(bin())
         .args([
