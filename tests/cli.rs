@@ -275,6 +275,17 @@ fn the_summary_says_which_fault_cleared_and_when() {
     };
     assert!(row("motor1 ").ends_with("cleared at t=136.62 s"), "{out}");
     assert!(row("motor2 ").ends_with("healthy"), "{out}");
+    // The count is of faults: motor 2's `excitation_low` read "2 decisions, healthy".
+    let count = |name: &str| {
+        let r = row(name);
+        let words: Vec<&str> = r.split_whitespace().collect();
+        let state = words
+            .iter()
+            .position(|w| *w == "healthy" || *w == "cleared");
+        state.and_then(|i| words[i - 1].parse::<u32>().ok())
+    };
+    assert_eq!(count("motor1 "), Some(1), "{out}");
+    assert_eq!(count("motor2 "), Some(0), "{out}");
 }
 
 /// `--speed` on a log whose first timestamp is garbage (zero): the replay skips the

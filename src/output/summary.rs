@@ -123,12 +123,18 @@ pub fn render(
             "gamma [bounds]",
             "delta [bounds]",
             "q_gamma q_delta",
-            "decisions",
+            "faults",
         );
         for (j, a) in profile.actuators.iter().enumerate() {
+            // Fault episodes (not every decision: a healthy motor with six `excitation_low`
+            // read "6 decisions, healthy").
             let n = decisions
                 .iter()
-                .filter(|d| d.sysid == *sysid && d.actuator.as_deref() == Some(a.name.as_str()))
+                .filter(|d| {
+                    d.sysid == *sysid
+                        && d.actuator.as_deref() == Some(a.name.as_str())
+                        && d.event == crate::diagnose::vehicle::Event::Fault
+                })
                 .count();
             // With no fault in force: "healthy", or when its fault was cleared, since when
             // (the estimates may still be on their way back: quad + motor 1 read gamma 0.87
