@@ -181,7 +181,8 @@ pub struct PipelineCounters {
     /// Samples without a_z when the model measures it: skipped while estimating, left out of
     /// the a_z fit (not the rates') while calibrating.
     pub missing_az: u64,
-    /// Samples dropped because an actuator's output channel carried no PWM (0 or absent) or not a pulse width (over `MAX_PWM_US`).
+    /// Samples dropped because an actuator's output channel carried no PWM (0 or absent) or
+    /// not a pulse width (over `MAX_PWM_US`).
     pub missing_output: u64,
     pub decisions: u64,
 }
@@ -190,6 +191,15 @@ pub struct PipelineCounters {
 /// joined a flight under way (a real vehicle spends longer than this on the ground between
 /// boot and take-off; a simulator starts airborne at boot).
 const JOINED_IN_FLIGHT_S: f64 = 30.0;
+/// The PWM (µs) on actuator `a`'s output channel in sample `s`; 0 when the sample has none.
+fn pwm_of(a: &crate::telemetry::profile::ActuatorSpec, s: &TelemetrySample) -> u16 {
+    usize::from(a.channel)
+        .checked_sub(1)
+        .and_then(|c| s.pwm.get(c))
+        .copied()
+        .unwrap_or(0)
+}
+
 /// Longest output pulse taken as a command (µs): servo and ESC pulses stay within 500-2500;
 /// 65535 marks an unused channel.
 pub const MAX_PWM_US: f64 = 3000.0;
@@ -522,11 +532,7 @@ impl VehiclePipeline {
     fn normalise(profile: &Profile, s: &TelemetrySample) -> Result<[f64; MAX_ACTUATORS], usize> {
         let mut u = [0.0; MAX_ACTUATORS];
         for (j, a) in profile.actuators.iter().enumerate() {
-            let pwm = usize::from(a.channel)
-                .checked_sub(1)
-                .and_then(|c| s.pwm.get(c))
-                .copied()
-                .unwrap_or(0);
+            let pwm = pwm_of(a, s);
             // 0: the channel is unused; 65535 (UINT16_MAX) marks it unused too, and no servo
             // or ESC pulse is longer than MAX_PWM_US.
             if pwm == 0 || f64::from(pwm) > MAX_PWM_US {
@@ -552,11 +558,7 @@ impl VehiclePipeline {
                 counters.missing_output += 1;
                 if !std::mem::replace(warned, true) {
                     let a = &profile.actuators[j];
-                    let pwm = usize::from(a.channel)
-                        .checked_sub(1)
-                        .and_then(|c| s.pwm.get(c))
-                        .copied()
-                        .unwrap_or(0);
+                    let pwm = pwm_of(a, s);
                     let what = if pwm == 0 {
                         format!("no PWM on output channel {} ({})", a.channel, a.name)
                     } else {

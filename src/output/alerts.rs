@@ -311,20 +311,31 @@ impl Alerts {
             self.state.retain(|k, _| kept(k));
             self.loss_said.retain(|k, _| kept(k));
         }
-        for (j, a) in profile.actuators.iter().enumerate() {
-            let key = (sysid, a.name.clone());
-            if let Some(said) = self.loss_said.get(&key) {
-                let points = |g: f64| (1.0 - g) * 100.0;
-                let moved = (points(est[0][j].gamma) - points(said.gamma.unwrap_or(1.0))).abs();
-                if moved >= LOSS_RESAY_POINTS && t - said.t >= LOSS_RESAY_S {
+        // Losses in force whose size has moved far from their last text (looked up per loss,
+        // not per actuator and step: no key is made unless one is due).
+        let points = |g: f64| (1.0 - g) * 100.0;
+        let resay: Vec<Decision> = self
+            .loss_said
+            .iter()
+            .filter(|((id, _), said)| *id == sysid && t - said.t >= LOSS_RESAY_S)
+            .filter_map(|((_, name), said)| {
+                let j = profile.actuators.iter().position(|a| &a.name == name)?;
+                let gamma = est[0].get(j)?.gamma;
+                let moved = (points(gamma) - points(said.gamma.unwrap_or(1.0))).abs();
+                (moved >= LOSS_RESAY_POINTS).then(|| {
                     let mut d = said.clone();
                     d.event = Event::Changed;
                     d.t = t;
-                    d.gamma = Some(est[0][j].gamma);
-                    self.texts_resized += 1;
-                    self.on_decision(&d);
-                }
-            }
+                    d.gamma = Some(gamma);
+                    d
+                })
+            })
+            .collect();
+        for d in resay {
+            self.texts_resized += 1;
+            self.on_decision(&d);
+        }
+        for (j, a) in profile.actuators.iter().enumerate() {
             self.latest.insert(
                 (sysid, a.name.clone()),
                 Latest {
