@@ -121,10 +121,15 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
                 ),
                 Some(FaultClass::Stuck) => (MavSeverity::MAV_SEVERITY_CRITICAL, "stuck".into()),
                 // The output's offset at the operating point: the filter's delta alone can be
-                // ~0 with the change in its gain (hexa motor 5 stuck read "bias -0.00").
+                // ~0 with the change in its gain (hexa motor 5 stuck read "bias -0.00"). In %
+                // of the output's range (motor) or throw (servo: trim to end), as a planner
+                // shows nothing to say what a bare "+0.15" is.
                 Some(FaultClass::Bias) => (
                     MavSeverity::MAV_SEVERITY_ERROR,
-                    format!("bias {:+.2}", d.deviation.or(d.delta).unwrap_or(0.0)),
+                    format!(
+                        "bias {:+.0}%",
+                        d.deviation.or(d.delta).unwrap_or(0.0) * 100.0
+                    ),
                 ),
                 Some(FaultClass::Drift) => (MavSeverity::MAV_SEVERITY_WARNING, "drift".into()),
                 Some(FaultClass::Unclassified) | None => {
@@ -484,7 +489,7 @@ mod tests {
         d.delta = Some(-0.001);
         d.deviation = Some(0.121);
         let (sev, text) = statustext(&d).unwrap();
-        assert_eq!(text, "AHC motor5 bias +0.12 UKF+ESMF");
+        assert_eq!(text, "AHC motor5 bias +12% UKF+ESMF");
         assert_eq!(sev, MavSeverity::MAV_SEVERITY_ERROR);
     }
 
