@@ -153,6 +153,12 @@ pub struct VehicleAssembler {
     /// `lost_frames` when the first message of a possible reboot came: a confirmed reboot
     /// restarts the sequence, and what its jump counted is taken back.
     lost_at_reboot_candidate: u64,
+    /// `lost_frames` after the last frame that advanced the clock. The new boot's first frames
+    /// are often unstamped (HEARTBEAT): their sequence jump comes before the first message
+    /// that makes the reboot a candidate, and is taken back from here.
+    lost_at_last_tick: u64,
+    /// The frame being read advanced the clock (set by `tick`, read by `on_sequence`).
+    ticked: bool,
     /// Messages dropped since then (counted as reordered until the reboot is confirmed).
     held_at_reboot_candidate: u64,
 }
@@ -221,6 +227,8 @@ impl VehicleAssembler {
             pending: None,
             seq: None,
             lost_at_reboot_candidate: 0,
+            lost_at_last_tick: 0,
+            ticked: false,
             held_at_reboot_candidate: 0,
         }
     }
@@ -262,9 +270,11 @@ impl VehicleAssembler {
     fn tick(&mut self, t: f64) -> bool {
         let Some(c) = self.clock else {
             self.clock = Some(t);
+            self.ticked = true;
             return true;
         };
         if !self.behind(t) {
+            self.ticked = true;
             self.reboot_candidate = None;
             self.clock = Some(c.max(t));
             return true;
@@ -276,7 +286,7 @@ impl VehicleAssembler {
         if !first.is_some_and(|first| t - first >= REBOOT_HOLD_S) {
             // Not (yet) enough of the new clock: dropped and counted.
             if first.is_none() {
-                self.lost_at_reboot_candidate = self.counters.lost_frames;
+                self.lost_at_reboot_candidate = self.lost_at_last_tick;
                 self.held_at_reboot_candidate = 0;
             }
             self.reboot_candidate = Some(first.unwrap_or(t));
@@ -317,6 +327,13 @@ impl VehicleAssembler {
         if !self.is_autopilot_component(compid) {
             return;
         }
+        self.count_sequence(seq);
+        if std::mem::take(&mut self.ticked) {
+            self.lost_at_last_tick = self.counters.lost_frames;
+        }
+    }
+
+    fn count_sequence(&mut self, seq: u8) {
         // Before the first frame nothing was missed: the whole window reads as arrived.
         let Some((newest, seen)) = self.seq else {
             self.seq = Some((seq, u64::MAX));
@@ -1132,6 +1149,36 @@ mod tests {
         }
         assert_eq!(a.counters.reboots, 1);
         assert_eq!(a.counters.lost_frames, 1);
+    }
+
+    /// The same when the new boot speaks first with unstamped frames (a HEARTBEAT, as
+    /// ArduPilot and our simulator do): their jump came before the reboot was suspected, and
+    /// a restarted simulator over UDP read "39 frames missing" with none lost.
+    #[test]
+    fn a_reboot_takes_back_the_jump_of_the_new_boots_unstamped_frames() {
+        use crate::link::dialects::ahcmon::HEARTBEAT_DATA;
+        let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        let mut out = vec![];
+        let send = |a: &mut VehicleAssembler, out: &mut Vec<_>, msg: &MavMessage, seq: &mut u8| {
+            a.on_message(1, msg, out);
+            a.on_sequence(1, *seq);
+            *seq = seq.wrapping_add(1);
+        };
+        // 5593 frames (the last numbered 5592 mod 256 = 216), none lost.
+        let mut seq = 0u8;
+        for ms in (100_000..100_000 + 20 * 5593).step_by(20) {
+            send(&mut a, &mut out, &attitude(ms), &mut seq);
+        }
+        assert_eq!(a.counters.lost_frames, 0);
+        let mut seq = 0u8;
+        send(&mut a, &mut out, &heartbeat, &mut seq);
+        send(&mut a, &mut out, &heartbeat, &mut seq);
+        for ms in (1_000..3_000).step_by(20) {
+            send(&mut a, &mut out, &attitude(ms), &mut seq);
+        }
+        assert_eq!(a.counters.reboots, 1);
+        assert_eq!(a.counters.lost_frames, 0);
     }
 
     /// Another component claiming to be the autopilot first does not hide the autopilot's
