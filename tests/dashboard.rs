@@ -7,7 +7,7 @@ mod common;
 use ahcmon::diagnose::vehicle::{Decision, Event};
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
-use ahcmon::output::dashboard::{History, LinkInfo, UiState, render};
+use ahcmon::output::dashboard::{ChartHistory, History, LinkInfo, UiState, render};
 use ahcmon::output::jsonl::MonitorFiles;
 use ahcmon::pipeline::PipelineConfig;
 use ratatui::Terminal;
@@ -261,4 +261,97 @@ fn the_newest_decision_is_shown_in_full() {
     assert!(squeeze(&s).contains(&squeeze(detail)), "{detail}\n{s}");
     assert!(!s.contains("sysid 1  changed"), "{s}");
     assert!(s.contains("changed  swash2 (ch 2)"), "{s}");
+}
+
+/// The rows the decisions panel leaves empty go to the older decisions: they were cut to one
+/// line with rows standing empty below them.
+#[test]
+fn older_decisions_take_the_rows_left() {
+    let (m, d, hist) = state_at(50.0);
+    let s = draw(&m, &d, &hist, 100, 40, false);
+    let panel: Vec<&str> = s
+        .lines()
+        .skip_while(|l| !l.contains("decisions (newest first)"))
+        .skip(1)
+        .take_while(|l| !l.starts_with('└'))
+        .collect();
+    let shown = |d: &Decision| {
+        let squeeze = |s: &str| {
+            s.chars()
+                .filter(|c| !c.is_whitespace() && *c != '│' && *c != '…')
+                .collect::<String>()
+        };
+        squeeze(&panel.concat()).contains(&squeeze(d.detail.as_deref().unwrap_or("")))
+    };
+    let faults: Vec<&Decision> = d
+        .iter()
+        .rev()
+        .filter(|d| d.event != Event::ExcitationLow && d.detail.is_some())
+        .take(2)
+        .collect();
+    assert_eq!(faults.len(), 2, "two decisions by t=50 s");
+    assert!(
+        panel.iter().any(|l| l.trim_matches('│').trim().is_empty()),
+        "{s}"
+    );
+    assert!(shown(faults[0]) && shown(faults[1]), "{s}");
+}
+
+/// After a reboot the chart follows the new boot's clock once it estimates again: it stood on
+/// the old boot's last 30 s for the whole new flight.
+#[test]
+fn the_chart_follows_a_reboot() {
+    let (mut m, _, mut hist) = state_at(50.0);
+    let before = draw(&m, &[], &hist, 100, 32, false);
+    assert!(before.contains("50 s"), "{before}");
+    // The same autopilot again from its boot.
+    let mut r = TlogReader::open(demo_tlog()).unwrap();
+    let mut files = MonitorFiles::new(None, None, 1).unwrap();
+    files.echo = false;
+    while let Some((_, f)) = r.next_frame().unwrap() {
+        m.on_frame(&f, &mut files);
+        hist.sample(&m);
+        let t = m.pipelines.values().next().and_then(|p| p.last_sample_t);
+        if t.is_some_and(|t| (45.0..49.0).contains(&t)) {
+            break;
+        }
+    }
+    let after = draw(&m, &[], &hist, 100, 32, false);
+    assert!(after.contains("45 s") && !after.contains("50 s"), "{after}");
+}
+
+/// Freezing the chart (`f`) holds what it shows, and loses nothing of what came meanwhile: it
+/// stopped recording, and the hole was drawn as a flat line.
+#[test]
+fn a_frozen_chart_stands_and_keeps_recording() {
+    let mut r = TlogReader::open(demo_tlog()).unwrap();
+    let mut m = Monitor::new(PipelineConfig::default());
+    let mut files = MonitorFiles::new(None, None, 1).unwrap();
+    files.echo = false;
+    let mut chart = ChartHistory::new(30.0);
+    let mut frozen_at = None;
+    while let Some((_, f)) = r.next_frame().unwrap() {
+        m.on_frame(&f, &mut files);
+        let Some(t) = m.pipelines.values().next().and_then(|p| p.last_sample_t) else {
+            continue;
+        };
+        let frozen = (40.0..44.0).contains(&t);
+        let shown = chart.update(&m, frozen).times(1, 0).last();
+        if frozen {
+            // What it shows stands at the moment it froze.
+            assert_eq!(*frozen_at.get_or_insert(shown), shown);
+        }
+        if t >= 46.0 {
+            break;
+        }
+    }
+    let t0 = frozen_at.flatten().expect("estimating by t=40 s");
+    assert!((40.0..40.1).contains(&t0), "{t0}");
+    let times: Vec<f64> = chart.live.times(1, 0).collect();
+    let widest = times.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    assert!(
+        times.len() > 500 && widest < 0.05,
+        "{} times, widest step {widest}",
+        times.len()
+    );
 }

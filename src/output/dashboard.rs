@@ -92,7 +92,7 @@ fn selected_sysid(monitor: &Monitor, ui: &UiState) -> Option<u8> {
 type Series = VecDeque<(f64, [AhcEstimate; 2])>;
 
 /// Chart history: per (sysid, actuator) the last `window_s` of both filters' estimates.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub struct History {
     pub window_s: f64,
     series: BTreeMap<(u8, usize), Series>,
@@ -115,8 +115,12 @@ impl History {
             let l = profile.actuators.len().min(MAX_ACTUATORS);
             for (j, (ukf, esmf)) in est[0][..l].iter().zip(&est[1][..l]).enumerate() {
                 let s = self.series.entry((*sysid, j)).or_default();
-                if s.back().is_some_and(|(last, _)| *last >= *t) {
-                    continue;
+                match s.back() {
+                    Some((last, _)) if *last == *t => continue,
+                    // The pipeline's clock only goes back on a reboot: the new boot's chart
+                    // starts afresh (it stood on the old boot's last 30 s for the whole flight).
+                    Some((last, _)) if *last > *t => s.clear(),
+                    _ => {}
                 }
                 s.push_back((*t, [*ukf, *esmf]));
                 while s.front().is_some_and(|(t0, _)| t - t0 > self.window_s) {
@@ -124,6 +128,43 @@ impl History {
                 }
             }
         }
+    }
+
+    /// The times charted for one actuator of one vehicle.
+    pub fn times(&self, sysid: u8, actuator: usize) -> impl Iterator<Item = f64> + '_ {
+        self.series
+            .get(&(sysid, actuator))
+            .into_iter()
+            .flat_map(|s| s.iter().map(|(t, _)| *t))
+    }
+}
+
+/// The chart's history as the dashboard keeps it: recorded at every redraw, paused or
+/// frozen too (pausing or freezing left a hole in it, drawn as a flat line), and shown as it
+/// stood when frozen.
+#[derive(Debug, Default)]
+pub struct ChartHistory {
+    pub live: History,
+    frozen: Option<History>,
+}
+
+impl ChartHistory {
+    pub fn new(window_s: f64) -> Self {
+        Self {
+            live: History::new(window_s),
+            frozen: None,
+        }
+    }
+
+    /// Record the pipelines' latest estimates; the history to draw.
+    pub fn update(&mut self, monitor: &Monitor, frozen: bool) -> &History {
+        self.live.sample(monitor);
+        if !frozen {
+            self.frozen = None;
+        } else if self.frozen.is_none() {
+            self.frozen = Some(self.live.clone());
+        }
+        self.frozen.as_ref().unwrap_or(&self.live)
     }
 }
 
@@ -478,32 +519,34 @@ fn chart(
 fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Option<u8>) {
     let n = area.height.saturating_sub(2) as usize;
     let width = area.width.saturating_sub(2) as usize;
-    let mut lines: Vec<Line> = vec![];
-    for (k, d) in decisions
+    let shown: Vec<(Style, Vec<String>)> = decisions
         .iter()
         .rev()
         .filter(|d| sysid.is_none_or(|s| d.sysid == s))
-        .enumerate()
-    {
-        if lines.len() >= n {
-            break;
-        }
-        let style = match d.event {
-            Event::Fault | Event::Changed => Style::default().fg(Color::Red),
-            Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
-            Event::LinkLost | Event::FilterReset => Style::default().fg(Color::Yellow),
-            Event::ExcitationLow => Style::default().fg(Color::DarkGray),
-        };
-        // The vehicle shown is the selected one: its id on every line only cuts the rest.
-        let text = describe_with(d, sysid.is_none());
-        // The newest in full (its numbers and detail are what the operator reads now), as
-        // many lines as it needs but one left for the one before; the older one line each.
-        let room = if k == 0 {
-            n.saturating_sub(1).max(1)
-        } else {
-            1
-        };
-        for part in wrap(&text, width).into_iter().take(room) {
+        .take(n)
+        .map(|d| {
+            let style = match d.event {
+                Event::Fault | Event::Changed => Style::default().fg(Color::Red),
+                Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
+                Event::LinkLost | Event::FilterReset => Style::default().fg(Color::Yellow),
+                Event::ExcitationLow => Style::default().fg(Color::DarkGray),
+            };
+            // The vehicle shown is the selected one: its id on every line only cuts the rest.
+            (style, wrap(&describe_with(d, sysid.is_none()), width))
+        })
+        .collect();
+    let rows = decision_rows(&shown.iter().map(|(_, l)| l.len()).collect::<Vec<_>>(), n);
+    let mut lines: Vec<Line> = vec![];
+    for ((style, parts), take) in shown.into_iter().zip(rows) {
+        let cut = take < parts.len();
+        for (i, mut part) in parts.into_iter().take(take).enumerate() {
+            // A decision cut short says so.
+            if cut && i + 1 == take {
+                if part.chars().count() >= width {
+                    part.pop();
+                }
+                part.push('…');
+            }
             lines.push(Line::styled(part, style));
         }
     }
@@ -515,6 +558,26 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
         ),
         area,
     );
+}
+
+/// Rows for each decision (newest first, each `lens[k]` lines in full) in `n` rows: one each
+/// at least, the newest in full as far as that allows (its numbers and detail are what the
+/// operator reads now), then the rows left to the older ones in turn: rows stood empty
+/// under older decisions cut to one line.
+fn decision_rows(lens: &[usize], n: usize) -> Vec<usize> {
+    let m = lens.len().min(n);
+    let mut rows = vec![1; m];
+    let Some(newest) = lens.first() else {
+        return rows;
+    };
+    rows[0] = (*newest).min(n + 1 - m).max(1);
+    let mut left = n - rows.iter().sum::<usize>();
+    for (r, len) in rows.iter_mut().zip(lens).skip(1) {
+        let more = (len.saturating_sub(1)).min(left);
+        *r += more;
+        left -= more;
+    }
+    rows
 }
 
 /// `text` in lines of at most `width` characters, broken at spaces (a word longer than a line
@@ -647,7 +710,7 @@ fn help(f: &mut Frame, area: Rect) {
 /// terminal restored on drop, on panic (hook) and on quit.
 pub struct TerminalUi {
     terminal: ratatui::Terminal<ratatui::backend::CrosstermBackend<std::io::Stdout>>,
-    pub history: History,
+    pub history: ChartHistory,
     pub ui: UiState,
     pub link: LinkInfo,
     frames_window: VecDeque<(std::time::Instant, u64)>,
@@ -688,7 +751,7 @@ impl TerminalUi {
         let terminal = ratatui::Terminal::new(backend)?;
         Ok(Self {
             terminal,
-            history: History::new(30.0),
+            history: ChartHistory::new(30.0),
             ui: UiState::default(),
             link: LinkInfo {
                 name: link_name.to_string(),
@@ -808,15 +871,14 @@ impl TerminalUi {
         {
             self.link.ended = Some(label);
         }
+        // Recorded while paused too: the chart has no hole when it goes on.
+        let history = self.history.update(monitor, self.ui.frozen);
         // Paused: the screen stands, once drawn with its PAUSED mark.
         if self.ui.paused && self.pause_drawn {
             return Ok(());
         }
         self.pause_drawn = self.ui.paused;
-        if !self.ui.frozen && !self.ui.paused {
-            self.history.sample(monitor);
-        }
-        let (history, ui, link) = (&self.history, &self.ui, &self.link);
+        let (ui, link) = (&self.ui, &self.link);
         self.terminal
             .draw(|f| render(f, monitor, decisions, history, ui, link))?;
         Ok(())
@@ -831,7 +893,22 @@ impl Drop for TerminalUi {
 
 #[cfg(test)]
 mod tests {
-    use super::wrap;
+    use super::{decision_rows, wrap};
+
+    #[test]
+    fn decision_rows_fill_the_panel_newest_first() {
+        // The newest in full, the older ones in full while rows are left.
+        assert_eq!(decision_rows(&[3, 2, 2], 8), vec![3, 2, 2]);
+        assert_eq!(decision_rows(&[3, 3, 3], 6), vec![3, 2, 1]);
+        // Many decisions: one row each, the newest leaving one row for each other.
+        assert_eq!(
+            decision_rows(&[4, 3, 3, 3, 3, 3], 6),
+            vec![1, 1, 1, 1, 1, 1]
+        );
+        assert_eq!(decision_rows(&[4, 3, 3], 6), vec![4, 1, 1]);
+        assert_eq!(decision_rows(&[9], 4), vec![4]);
+        assert_eq!(decision_rows(&[], 4), Vec::<usize>::new());
+    }
 
     #[test]
     fn wrap_keeps_every_word_within_the_width() {
