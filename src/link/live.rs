@@ -14,7 +14,7 @@ use tokio::sync::mpsc;
 /// How long a link may stay silent from the start before the headless monitor says so.
 const NO_DATA_HINT: Duration = Duration::from_secs(5);
 
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct LiveOptions {
     /// No frame from a vehicle for this long: `link_lost`.
     pub link_timeout: Duration,
@@ -25,6 +25,9 @@ pub struct LiveOptions {
     /// `--request-rates HZ`: ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU
     /// (HIGHRES_IMU from a non-ArduPilot autopilot) at this rate (SET_MESSAGE_INTERVAL), the only thing ever sent on the vehicle link.
     pub request_rates: Option<f64>,
+    /// Set when the stream has ended as planned (the demo's flight): the silence after it is
+    /// not told as a lost link (the footer says END OF FLIGHT).
+    pub stream_over: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Default for LiveOptions {
@@ -34,6 +37,7 @@ impl Default for LiveOptions {
             exit_idle: None,
             channel_capacity: 4096,
             request_rates: None,
+            stream_over: None,
         }
     }
 }
@@ -208,13 +212,17 @@ pub async fn run(
             _ = tick.tick() => {
                 send_alerts(sink, alerts.as_mut(), clock).await;
                 let now = Instant::now();
+                let over = opts
+                    .stream_over
+                    .as_ref()
+                    .is_some_and(|o| o.load(std::sync::atomic::Ordering::Relaxed));
                 for (sysid, seen) in &last_seen {
                     // Only vehicles the monitor knows (not every stray system id).
                     if !monitor.assembler.vehicles.contains_key(sysid) {
                         continue;
                     }
                     let gone = now.duration_since(*seen) > opts.link_timeout;
-                    if gone && lost.get(sysid) != Some(&true) {
+                    if gone && !over && lost.get(sysid) != Some(&true) {
                         lost.insert(*sysid, true);
                         // Shortest form that shows the value (0.03 s, 2 s, 2.5 s).
                         let detail = format!("no frame for {} s", opts.link_timeout.as_secs_f64());
@@ -290,7 +298,11 @@ fn needed(autopilot: crate::link::dialects::ahcmon::MavAutopilot) -> [(u32, &'st
     } else {
         (105, "HIGHRES_IMU")
     };
-    [(30, "ATTITUDE"), (36, "SERVO_OUTPUT_RAW"), imu]
+    [
+        (30, "ATTITUDE"),
+        (SERVO_OUTPUT_RAW_ID, "SERVO_OUTPUT_RAW"),
+        imu,
+    ]
 }
 /// How long the achieved rates are counted after the request.
 const RATE_WINDOW: Duration = Duration::from_secs(5);
@@ -318,7 +330,13 @@ struct Asked {
     /// a simulator sent at `--speed` is not reported at its wall rate.
     vehicle_span: Option<(f64, f64)>,
     vehicle_counts: [u64; 3],
+    /// Of the outputs' frames, those that came as ACTUATOR_OUTPUT_STATUS (PX4 may stream its
+    /// outputs so; the assembler takes either): they count for SERVO_OUTPUT_RAW's rate.
+    output_status_frames: u64,
 }
+
+const SERVO_OUTPUT_RAW_ID: u32 = 36;
+const ACTUATOR_OUTPUT_STATUS_ID: u32 = 375;
 
 impl Asked {
     /// The achieved rates' report, and what to say about missing acknowledgements.
@@ -328,11 +346,19 @@ impl Asked {
             Some((a, b)) if b > a => (b - a, "vehicle", &self.vehicle_counts),
             _ => (wall, "wall-clock", &self.counts),
         };
+        // The outputs under the name of the message that brought most of them.
+        let name = |(id, name): &(u32, &'static str), n: u64| {
+            if *id == SERVO_OUTPUT_RAW_ID && 2 * self.output_status_frames > n {
+                "ACTUATOR_OUTPUT_STATUS"
+            } else {
+                name
+            }
+        };
         let achieved: Vec<String> = self
             .messages
             .iter()
             .zip(counts.iter())
-            .map(|((_, name), n)| format!("{name} {:.1} Hz", *n as f64 / span))
+            .map(|(m, n)| format!("{} {:.1} Hz", name(m, *n), *n as f64 / span))
             .collect();
         let mut text = format!(
             "rates achieved (requested {hz} Hz, over {span:.1} s of {clock} time): {}",
@@ -345,7 +371,7 @@ impl Asked {
             .iter()
             .zip(counts.iter())
             .filter(|(_, n)| (**n as f64 / span) < 0.8 * hz)
-            .map(|((_, name), _)| *name)
+            .map(|(m, n)| name(m, *n))
             .collect();
         if !slow.is_empty() {
             text.push_str(&format!(
@@ -410,8 +436,14 @@ impl RateRequests {
                 }
                 _ => {}
             }
-            if let Some(k) = a.messages.iter().position(|(id, _)| *id == frame.msg_id) {
+            let status = frame.msg_id == ACTUATOR_OUTPUT_STATUS_ID;
+            if let Some(k) = a
+                .messages
+                .iter()
+                .position(|(id, _)| *id == frame.msg_id || (status && *id == SERVO_OUTPUT_RAW_ID))
+            {
                 a.counts[k] += 1;
+                a.output_status_frames += u64::from(status);
                 // The first ATTITUDE opens the span; what comes after it falls within.
                 let opened = a.vehicle_span.is_some_and(|(first, last)| {
                     !matches!(frame.msg, MavMessage::ATTITUDE(_)) || last > first
@@ -487,6 +519,7 @@ impl RateRequests {
                 messages: asked,
                 vehicle_span: None,
                 vehicle_counts: [0; 3],
+                output_status_frames: 0,
             },
         );
         out
@@ -603,6 +636,51 @@ mod tests {
         let mut few = LiveCounters::default();
         few.keep_note("only".into());
         assert_eq!(few.notes_to_say(), vec!["only".to_string()]);
+    }
+
+    /// A PX4 that streams its outputs as ACTUATOR_OUTPUT_STATUS gets them counted as the
+    /// outputs: it was told its SERVO_OUTPUT_RAW stream was starved (0.0 Hz, "under 80 %").
+    #[test]
+    fn outputs_as_actuator_output_status_count_for_the_rate_asked() {
+        use crate::link::dialects::ahcmon::{ACTUATOR_OUTPUT_STATUS_DATA, HIGHRES_IMU_DATA};
+        let mut m = Monitor::new(PipelineConfig::default());
+        let mut sink = MonitorFiles::new(None, None, 1).unwrap();
+        sink.echo = false;
+        let mut rates = RateRequests::default();
+        let heartbeat = frame(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            ..Default::default()
+        }));
+        m.on_frame(&heartbeat, &mut sink);
+        assert_eq!(rates.on_frame(&heartbeat, &m, 50.0, &mut sink).len(), 3);
+        for k in 0..250u32 {
+            let ms = 1000 + 20 * k;
+            for msg in [
+                MavMessage::ATTITUDE(ATTITUDE_DATA {
+                    time_boot_ms: ms,
+                    ..Default::default()
+                }),
+                MavMessage::ACTUATOR_OUTPUT_STATUS(ACTUATOR_OUTPUT_STATUS_DATA {
+                    time_usec: u64::from(ms) * 1000,
+                    active: 4,
+                    ..Default::default()
+                }),
+                MavMessage::HIGHRES_IMU(HIGHRES_IMU_DATA {
+                    time_usec: u64::from(ms) * 1000,
+                    ..Default::default()
+                }),
+            ] {
+                let f = frame(msg);
+                m.on_frame(&f, &mut sink);
+                rates.on_frame(&f, &m, 50.0, &mut sink);
+            }
+        }
+        let report = rates.asked[&3].report(50.0);
+        assert!(
+            report.contains("ACTUATOR_OUTPUT_STATUS 50.") && !report.contains("under 80 %"),
+            "{report}"
+        );
     }
 
     #[test]
