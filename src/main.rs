@@ -270,7 +270,8 @@ struct RunArgs {
     #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     decimate: u64,
     /// End the healthy calibration stretch at this vehicle time (s since boot, as in the
-    /// decisions' `t`); default: the first 20 s after take-off.
+    /// decisions' `t`); default: 20 s from when the vehicle is airborne and settled (3 s
+    /// after take-off).
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     calibrate_until: Option<f64>,
 }
@@ -833,7 +834,7 @@ fn monitor(
     // The dashboard unless asked not to, or when stdout is not a terminal (CI, pipes).
     let dashboard = !headless && std::io::stdout().is_terminal();
     let alerts: Option<ConnSpec> = alerts.map(str::parse).transpose()?;
-    let opts = ahcmon::link::live::LiveOptions {
+    let mut opts = ahcmon::link::live::LiveOptions {
         link_timeout: std::time::Duration::from_secs_f64(in_range(
             "--link-timeout",
             link_timeout,
@@ -885,6 +886,9 @@ fn monitor(
             .map(|d| ahcmon::link::simulate::script_on_vehicle_clock(&d.named.scenario));
         // demo: the simulated vehicle flies in this process, over loopback UDP to the monitor.
         let flight_over = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        if demo.is_some() {
+            opts.stream_over = Some(flight_over.clone());
+        }
         let sim = match (demo, local) {
             (Some(d), Some(addr)) => {
                 let target: ConnSpec = format!("udpout:127.0.0.1:{}", addr.port()).parse()?;

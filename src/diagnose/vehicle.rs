@@ -674,7 +674,8 @@ impl Diagnoser {
             // the pair fitted clearly better (`mixed_seen`): not a class.
             "(not taken as the class)"
         } else {
-            "so far (not clearly)"
+            // Said beside a class it may contradict: the class is not the data's.
+            "not clearly yet (the class is the filters' reading)"
         };
         Some(format!(
             "{since} t={start:.2} s the data fit {what} best, {how}"
