@@ -905,7 +905,10 @@ fn monitor(
                     let flown =
                         ahcmon::link::simulate::fly(&d.named, &opts, Some(&mut out), None, None)
                             .await;
-                    over.store(true, std::sync::atomic::Ordering::Relaxed);
+                    // A flight that failed is no planned end: its silence is a lost link.
+                    if flown.is_ok() {
+                        over.store(true, std::sync::atomic::Ordering::Relaxed);
+                    }
                     flown
                 }))
             }

@@ -290,6 +290,9 @@ fn older_decisions_take_the_rows_left() {
         .take(2)
         .collect();
     assert_eq!(faults.len(), 2, "two decisions by t=50 s");
+    // The older one takes more than a row of the panel (98 columns inside).
+    let older = faults[1].detail.as_deref().unwrap_or("");
+    assert!(older.chars().count() > 98, "{older}");
     assert!(
         panel.iter().any(|l| l.trim_matches('│').trim().is_empty()),
         "{s}"

@@ -330,9 +330,9 @@ struct Asked {
     /// a simulator sent at `--speed` is not reported at its wall rate.
     vehicle_span: Option<(f64, f64)>,
     vehicle_counts: [u64; 3],
-    /// Of the outputs' frames, those that came as ACTUATOR_OUTPUT_STATUS (PX4 may stream its
-    /// outputs so; the assembler takes either): they count for SERVO_OUTPUT_RAW's rate.
-    output_status_frames: u64,
+    /// ACTUATOR_OUTPUT_STATUS frames (as `counts` and `vehicle_counts`): PX4 may stream its
+    /// outputs so, and the assembler takes either; the faster of the two is the outputs' rate.
+    status_counts: [u64; 2],
 }
 
 const SERVO_OUTPUT_RAW_ID: u32 = 36;
@@ -342,23 +342,31 @@ impl Asked {
     /// The achieved rates' report, and what to say about missing acknowledgements.
     fn report(&self, hz: f64) -> String {
         let wall = self.since.elapsed().as_secs_f64();
-        let (span, clock, counts) = match self.vehicle_span {
-            Some((a, b)) if b > a => (b - a, "vehicle", &self.vehicle_counts),
-            _ => (wall, "wall-clock", &self.counts),
+        let (span, clock, counts, status) = match self.vehicle_span {
+            Some((a, b)) if b > a => (
+                b - a,
+                "vehicle",
+                &self.vehicle_counts,
+                self.status_counts[1],
+            ),
+            _ => (wall, "wall-clock", &self.counts, self.status_counts[0]),
         };
-        // The outputs under the name of the message that brought most of them.
-        let name = |(id, name): &(u32, &'static str), n: u64| {
-            if *id == SERVO_OUTPUT_RAW_ID && 2 * self.output_status_frames > n {
-                "ACTUATOR_OUTPUT_STATUS"
-            } else {
-                name
-            }
-        };
-        let achieved: Vec<String> = self
+        // The outputs' rate is the faster of their two messages, under its name.
+        let rated: Vec<(&str, u64)> = self
             .messages
             .iter()
             .zip(counts.iter())
-            .map(|(m, n)| format!("{} {:.1} Hz", name(m, *n), *n as f64 / span))
+            .map(|((id, name), n)| {
+                if *id == SERVO_OUTPUT_RAW_ID && status > *n {
+                    ("ACTUATOR_OUTPUT_STATUS", status)
+                } else {
+                    (*name, *n)
+                }
+            })
+            .collect();
+        let achieved: Vec<String> = rated
+            .iter()
+            .map(|(name, n)| format!("{name} {:.1} Hz", *n as f64 / span))
             .collect();
         let mut text = format!(
             "rates achieved (requested {hz} Hz, over {span:.1} s of {clock} time): {}",
@@ -366,12 +374,10 @@ impl Asked {
         );
         // Under 80 % of the rate asked for (ArduPilot caps streams by its SRn_ parameters
         // and by the link's bandwidth).
-        let slow: Vec<&str> = self
-            .messages
+        let slow: Vec<&str> = rated
             .iter()
-            .zip(counts.iter())
-            .filter(|(_, n)| (**n as f64 / span) < 0.8 * hz)
-            .map(|(m, n)| name(m, *n))
+            .filter(|(_, n)| (*n as f64 / span) < 0.8 * hz)
+            .map(|(name, _)| *name)
             .collect();
         if !slow.is_empty() {
             text.push_str(&format!(
@@ -436,19 +442,22 @@ impl RateRequests {
                 }
                 _ => {}
             }
+            let slot = a.messages.iter().position(|(id, _)| *id == frame.msg_id);
             let status = frame.msg_id == ACTUATOR_OUTPUT_STATUS_ID;
-            if let Some(k) = a
-                .messages
-                .iter()
-                .position(|(id, _)| *id == frame.msg_id || (status && *id == SERVO_OUTPUT_RAW_ID))
-            {
-                a.counts[k] += 1;
-                a.output_status_frames += u64::from(status);
+            if slot.is_some() || status {
                 // The first ATTITUDE opens the span; what comes after it falls within.
                 let opened = a.vehicle_span.is_some_and(|(first, last)| {
                     !matches!(frame.msg, MavMessage::ATTITUDE(_)) || last > first
                 });
-                a.vehicle_counts[k] += u64::from(opened);
+                let (wall, vehicle) = match slot {
+                    Some(k) => (&mut a.counts[k], &mut a.vehicle_counts[k]),
+                    None => {
+                        let [wall, vehicle] = &mut a.status_counts;
+                        (wall, vehicle)
+                    }
+                };
+                *wall += 1;
+                *vehicle += u64::from(opened);
             }
             if !a.reported && a.since.elapsed() >= RATE_WINDOW {
                 a.reported = true;
@@ -519,7 +528,7 @@ impl RateRequests {
                 messages: asked,
                 vehicle_span: None,
                 vehicle_counts: [0; 3],
-                output_status_frames: 0,
+                status_counts: [0; 2],
             },
         );
         out
@@ -638,11 +647,10 @@ mod tests {
         assert_eq!(few.notes_to_say(), vec!["only".to_string()]);
     }
 
-    /// A PX4 that streams its outputs as ACTUATOR_OUTPUT_STATUS gets them counted as the
-    /// outputs: it was told its SERVO_OUTPUT_RAW stream was starved (0.0 Hz, "under 80 %").
-    #[test]
-    fn outputs_as_actuator_output_status_count_for_the_rate_asked() {
-        use crate::link::dialects::ahcmon::{ACTUATOR_OUTPUT_STATUS_DATA, HIGHRES_IMU_DATA};
+    /// The rates report after 5 s of a PX4 at 50 Hz that sends, at step k (20 ms apart),
+    /// ATTITUDE, HIGHRES_IMU and what `outputs(k, ms)` gives.
+    fn px4_rates_report(outputs: impl Fn(u32, u32) -> Vec<MavMessage>) -> String {
+        use crate::link::dialects::ahcmon::HIGHRES_IMU_DATA;
         let mut m = Monitor::new(PipelineConfig::default());
         let mut sink = MonitorFiles::new(None, None, 1).unwrap();
         sink.echo = false;
@@ -656,29 +664,61 @@ mod tests {
         assert_eq!(rates.on_frame(&heartbeat, &m, 50.0, &mut sink).len(), 3);
         for k in 0..250u32 {
             let ms = 1000 + 20 * k;
-            for msg in [
+            let mut msgs = vec![
                 MavMessage::ATTITUDE(ATTITUDE_DATA {
                     time_boot_ms: ms,
-                    ..Default::default()
-                }),
-                MavMessage::ACTUATOR_OUTPUT_STATUS(ACTUATOR_OUTPUT_STATUS_DATA {
-                    time_usec: u64::from(ms) * 1000,
-                    active: 4,
                     ..Default::default()
                 }),
                 MavMessage::HIGHRES_IMU(HIGHRES_IMU_DATA {
                     time_usec: u64::from(ms) * 1000,
                     ..Default::default()
                 }),
-            ] {
+            ];
+            msgs.extend(outputs(k, ms));
+            for msg in msgs {
                 let f = frame(msg);
                 m.on_frame(&f, &mut sink);
                 rates.on_frame(&f, &m, 50.0, &mut sink);
             }
         }
-        let report = rates.asked[&3].report(50.0);
+        rates.asked[&3].report(50.0)
+    }
+
+    /// A PX4 that streams its outputs as ACTUATOR_OUTPUT_STATUS has them counted as the
+    /// outputs, under that name (it was told its SERVO_OUTPUT_RAW was starved at 0.0 Hz); with
+    /// both, the faster one is the outputs' rate, not their sum.
+    #[test]
+    fn outputs_as_actuator_output_status_count_for_the_rate_asked() {
+        use crate::link::dialects::ahcmon::{ACTUATOR_OUTPUT_STATUS_DATA, SERVO_OUTPUT_RAW_DATA};
+        let status = |ms: u32| {
+            MavMessage::ACTUATOR_OUTPUT_STATUS(ACTUATOR_OUTPUT_STATUS_DATA {
+                time_usec: u64::from(ms) * 1000,
+                active: 4,
+                ..Default::default()
+            })
+        };
+        let report = px4_rates_report(|_, ms| vec![status(ms)]);
         assert!(
             report.contains("ACTUATOR_OUTPUT_STATUS 50.") && !report.contains("under 80 %"),
+            "{report}"
+        );
+        // SERVO_OUTPUT_RAW at 10 Hz and ACTUATOR_OUTPUT_STATUS at 25 Hz: 25 Hz is too slow.
+        let report = px4_rates_report(|k, ms| {
+            let mut v = vec![];
+            if k % 5 == 0 {
+                v.push(MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
+                    time_usec: ms * 1000,
+                    ..Default::default()
+                }));
+            }
+            if k % 2 == 0 {
+                v.push(status(ms));
+            }
+            v
+        });
+        assert!(
+            report.contains("ACTUATOR_OUTPUT_STATUS 25.")
+                && report.contains("warning: ACTUATOR_OUTPUT_STATUS under 80 %"),
             "{report}"
         );
     }

@@ -96,6 +96,9 @@ type Series = VecDeque<(f64, [AhcEstimate; 2])>;
 pub struct History {
     pub window_s: f64,
     series: BTreeMap<(u8, usize), Series>,
+    /// Per vehicle, its reboots when last sampled (a new boot's chart starts afresh), and the
+    /// old boot's last estimate time, which the pipeline holds until the new boot estimates.
+    boots: BTreeMap<u8, (u64, Option<f64>)>,
 }
 
 impl History {
@@ -103,24 +106,35 @@ impl History {
         Self {
             window_s,
             series: BTreeMap::new(),
+            boots: BTreeMap::new(),
         }
     }
 
     /// Take the pipelines' latest estimates (called at the redraw rate).
     pub fn sample(&mut self, monitor: &Monitor) {
         for (sysid, p) in &monitor.pipelines {
+            let reboots = monitor
+                .assembler
+                .vehicles
+                .get(sysid)
+                .map_or(0, |v| v.counters.reboots);
+            let last_t = p.last.as_ref().map(|(t, _)| *t);
+            let boot = self.boots.entry(*sysid).or_insert((reboots, None));
+            if boot.0 != reboots {
+                *boot = (reboots, last_t);
+                self.series.retain(|(s, _), _| s != sysid);
+            }
             let (Some(profile), Some((t, est))) = (p.profile(), &p.last) else {
                 continue;
             };
+            if boot.1 == Some(*t) {
+                continue;
+            }
             let l = profile.actuators.len().min(MAX_ACTUATORS);
             for (j, (ukf, esmf)) in est[0][..l].iter().zip(&est[1][..l]).enumerate() {
                 let s = self.series.entry((*sysid, j)).or_default();
-                match s.back() {
-                    Some((last, _)) if *last == *t => continue,
-                    // The pipeline's clock only goes back on a reboot: the new boot's chart
-                    // starts afresh (it stood on the old boot's last 30 s for the whole flight).
-                    Some((last, _)) if *last > *t => s.clear(),
-                    _ => {}
+                if s.back().is_some_and(|(last, _)| *last >= *t) {
+                    continue;
                 }
                 s.push_back((*t, [*ukf, *esmf]));
                 while s.front().is_some_and(|(t0, _)| t - t0 > self.window_s) {
@@ -140,8 +154,8 @@ impl History {
 }
 
 /// The chart's history as the dashboard keeps it: recorded at every redraw, paused or
-/// frozen too (pausing or freezing left a hole in it, drawn as a flat line), and shown as it
-/// stood when frozen.
+/// frozen too (so no hole is drawn as a flat line when it goes on), and shown as it stood
+/// when frozen.
 #[derive(Debug, Default)]
 pub struct ChartHistory {
     pub live: History,
@@ -537,11 +551,12 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
         .collect();
     let rows = decision_rows(&shown.iter().map(|(_, l)| l.len()).collect::<Vec<_>>(), n);
     let mut lines: Vec<Line> = vec![];
-    for ((style, parts), take) in shown.into_iter().zip(rows) {
-        let cut = take < parts.len();
-        for (i, mut part) in parts.into_iter().take(take).enumerate() {
+    for ((style, parts), rows) in shown.into_iter().zip(rows) {
+        let cut = rows < parts.len();
+        for (i, mut part) in parts.into_iter().take(rows).enumerate() {
             // A decision cut short says so.
-            if cut && i + 1 == take {
+            if cut && i + 1 == rows {
+                part.truncate(part.trim_end().len());
                 if part.chars().count() >= width {
                     part.pop();
                 }
@@ -562,12 +577,11 @@ fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Optio
 
 /// Rows for each decision (newest first, each `lens[k]` lines in full) in `n` rows: one each
 /// at least, the newest in full as far as that allows (its numbers and detail are what the
-/// operator reads now), then the rows left to the older ones in turn: rows stood empty
-/// under older decisions cut to one line.
+/// operator reads now), then what rows are left to the older ones in turn.
 fn decision_rows(lens: &[usize], n: usize) -> Vec<usize> {
     let m = lens.len().min(n);
     let mut rows = vec![1; m];
-    let Some(newest) = lens.first() else {
+    let Some(newest) = lens.first().filter(|_| m > 0) else {
         return rows;
     };
     rows[0] = (*newest).min(n + 1 - m).max(1);
@@ -908,6 +922,7 @@ mod tests {
         assert_eq!(decision_rows(&[4, 3, 3], 6), vec![4, 1, 1]);
         assert_eq!(decision_rows(&[9], 4), vec![4]);
         assert_eq!(decision_rows(&[], 4), Vec::<usize>::new());
+        assert_eq!(decision_rows(&[3, 2], 0), Vec::<usize>::new());
     }
 
     #[test]
