@@ -206,6 +206,25 @@ pub const MAX_PWM_US: f64 = 3000.0;
 
 /// A calibration stretch shorter than this (s) is warned about.
 const SHORT_CALIBRATION_S: f64 = 10.0;
+/// A sample period (s) over which the stream is said to be too slow: the SITL manoeuvres
+/// decimated to 10 Hz are decided as at 50 Hz, at 4 Hz a motor's recovery read as stuck.
+const SLOW_PERIOD_S: f64 = 0.105;
+
+/// Rate spread (standard deviation, rad/s) above which a calibration stretch manoeuvred: a
+/// steady SITL hover spreads 0.0014, the SITL manoeuvres 0.14-0.26.
+const MOVED_RATE_STD: f64 = 0.05;
+
+/// The standard deviation of one rate axis over a calibration stretch.
+fn rate_spread(samples: &[CalibrationSample], axis: usize) -> f64 {
+    let n = samples.len().max(1) as f64;
+    let mean = samples.iter().map(|s| s.rates[axis]).sum::<f64>() / n;
+    (samples
+        .iter()
+        .map(|s| (s.rates[axis] - mean).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
 /// With a profile whose model `ahcmon calibrate` identified, the samples collected after the
 /// settle before estimating (s): enough to measure the sample period and seed the command
 /// history, nothing is fitted.
@@ -236,6 +255,8 @@ pub struct VehiclePipeline {
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
     /// Said once that an output channel carries no PWM.
     warned_missing_output: bool,
+    /// Said once that the samples come too slowly.
+    warned_slow: bool,
     /// Why the run failed (said when it happened; repeated in the summary).
     failure: Option<String>,
     /// What the monitor knew when the vehicle last rebooted (for the summary: `last` and
@@ -310,6 +331,7 @@ impl VehiclePipeline {
             seen_grounded: false,
             active: [None; MAX_ACTUATORS],
             warned_missing_output: false,
+            warned_slow: false,
             failure: None,
             before_reboot: None,
         }
@@ -919,6 +941,16 @@ impl VehiclePipeline {
         sink: &mut dyn PipelineSink,
     ) {
         let dt = sample_period(samples.iter().map(|s| s.t));
+        if dt > SLOW_PERIOD_S && !std::mem::replace(&mut self.warned_slow, true) {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: the samples come at {:.1} Hz (ATTITUDE with outputs every {:.0} ms): under 10 Hz the filters follow an actuator loosely and a class may be wrong; raise the stream rates (the ground station's, ArduPilot's SRn_/MAVn_ parameters, or --request-rates)",
+                    1.0 / dt,
+                    dt * 1e3
+                ),
+            );
+        }
         let l = profile.actuators.len();
         let mut profile = profile;
         // a_z is measured if the vehicle sends an IMU with most samples; those without it are
@@ -1045,6 +1077,7 @@ impl VehiclePipeline {
         // vehicle's, or a stretch that was not healthy flight (an offset-only axis, which a
         // steady hover does not excite, has little to explain and passes down to R² = -1).
         let mut poor: Vec<String> = Vec::new();
+        let mut unexplained: Vec<(&str, f64)> = Vec::new();
         let (calibrated, fit, summary) = if let Some(arx) = identified {
             let mut calibrated = profile.clone();
             set_noise_from_fit(&mut calibrated, &arx.quality.residual_std, dt);
@@ -1086,13 +1119,20 @@ impl VehiclePipeline {
             let mut calibrated = profile.with_rate_params(&fit.params);
             set_noise_from_fit(&mut calibrated, &fit.quality.residual_std, dt);
             let axes = ["roll", "pitch", "yaw", "a_z"];
-            for (axis, (r2, scaled)) in axes
+            for (i, (axis, (r2, scaled))) in axes
                 .iter()
                 .zip(fit.quality.r_squared.iter().zip(&fit.scaled))
                 .take(3)
+                .enumerate()
             {
                 if *r2 < if *scaled { 0.0 } else { -1.0 } {
                     poor.push(format!("{axis} R²={r2:.2}"));
+                }
+                // Left offset-only though the vehicle manoeuvred: the commands did not explain
+                // its motion on this geometry (a fault in the stretch, or another frame).
+                let spread = rate_spread(&shifted, i);
+                if !scaled && spread >= MOVED_RATE_STD {
+                    unexplained.push((axis, spread));
                 }
             }
             let summary: Vec<String> = fit
@@ -1130,6 +1170,25 @@ impl VehiclePipeline {
                 &format!(
                     "warning: the model fits {} worse than a constant: the profile ({}) may not be this vehicle's, or the stretch was not healthy flight; its estimates and decisions are not to be trusted",
                     poor.join(", "),
+                    calibrated.name
+                ),
+            );
+        }
+        if !unexplained.is_empty() {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: {} moved (rate spread {} rad/s) but the commands do not explain that motion on the geometry of {}: the calibration stretch may hold a fault, or the profile may not be this vehicle's; its estimates and decisions are not to be trusted",
+                    unexplained
+                        .iter()
+                        .map(|(a, _)| *a)
+                        .collect::<Vec<_>>()
+                        .join(" and "),
+                    unexplained
+                        .iter()
+                        .map(|(_, s)| format!("{s:.2}"))
+                        .collect::<Vec<_>>()
+                        .join(", "),
                     calibrated.name
                 ),
             );
