@@ -1,6 +1,7 @@
 //! The end-of-run summary of a replay or monitor session: per vehicle and actuator the final
 //! estimates with bounds, the decisions, and every counter of what was dropped.
 
+use crate::diagnose::vehicle::FaultClass;
 use crate::estimate::vehicle::FILTER_NAMES;
 use crate::link::FrameCounters;
 use crate::monitor::Monitor;
@@ -139,17 +140,50 @@ pub fn render(
             // With no fault in force: "healthy", or when its fault was cleared, since when
             // (the estimates may still be on their way back: quad + motor 1 read gamma 0.87
             // [0.85, 0.89] a while after its clearing, beside a bare "healthy").
+            // With the kind and onset of the fault that cleared: an operator reading the summary
+            // of a log learnt only that something had cleared.
             use crate::diagnose::vehicle::Event;
-            let cleared = decisions
+            let mut episode: Option<(f64, Option<FaultClass>)> = None;
+            let mut cleared = None;
+            for d in decisions
                 .iter()
-                .rev()
-                .find(|d| {
-                    d.sysid == *sysid
-                        && d.actuator.as_deref() == Some(a.name.as_str())
-                        && matches!(d.event, Event::Fault | Event::Changed | Event::Cleared)
+                .filter(|d| d.sysid == *sysid && d.actuator.as_deref() == Some(a.name.as_str()))
+            {
+                match d.event {
+                    Event::Fault => {
+                        episode = Some((d.t, d.class));
+                        cleared = None;
+                    }
+                    Event::Changed => {
+                        if let Some(e) = episode.as_mut() {
+                            e.1 = d.class;
+                        }
+                        cleared = None;
+                    }
+                    Event::Cleared => cleared = Some(d.t),
+                    _ => {}
+                }
+            }
+            // "cleared at t=57.22 s (loss_of_effectiveness from t=45.22 s; <also>)".
+            let cleared_with = |also: Option<String>| {
+                cleared.map(|t| {
+                    let mut notes: Vec<String> = episode
+                        .map(|(onset, class)| {
+                            format!(
+                                "{} from t={onset:.2} s",
+                                class.map_or("fault", |c| c.as_str())
+                            )
+                        })
+                        .into_iter()
+                        .collect();
+                    notes.extend(also);
+                    if notes.is_empty() {
+                        format!("cleared at t={t:.2} s")
+                    } else {
+                        format!("cleared at t={t:.2} s ({})", notes.join("; "))
+                    }
                 })
-                .filter(|d| d.event == Event::Cleared)
-                .map(|d| format!("cleared at t={:.2} s", d.t));
+            };
             // A fault in force at a reboot is not cleared by it.
             let at_reboot = p.before_reboot.and_then(|b| b.active[j]);
             let state = match (p.active[j], at_reboot, old_boot) {
@@ -158,11 +192,12 @@ pub fn render(
                     format!("{} at the reboot, not judged since", c.as_str())
                 }
                 // (A clearing after a fault at the reboot is the new boot's own.)
-                (None, Some(c), None) => match &cleared {
-                    Some(cl) => format!("{cl} ({} before the reboot)", c.as_str()),
-                    None => format!("healthy since the reboot ({} before)", c.as_str()),
-                },
-                (None, None, _) => cleared.unwrap_or_else(|| "healthy".into()),
+                (None, Some(c), None) => {
+                    cleared_with(Some(format!("{} before the reboot", c.as_str()))).unwrap_or_else(
+                        || format!("healthy since the reboot ({} before)", c.as_str()),
+                    )
+                }
+                (None, None, _) => cleared_with(None).unwrap_or_else(|| "healthy".into()),
             };
             for (f, name) in FILTER_NAMES.iter().enumerate() {
                 let e = est[f][j];
