@@ -1195,8 +1195,14 @@ fn replay(
     let mut ui = if !headless && std::io::stdout().is_terminal() {
         files.echo = false;
         Some(
-            ahcmon::output::dashboard::TerminalUi::start(&format!("replay {}", file.display()))
-                .context("cannot start the dashboard (try --headless)")?,
+            // The file's name: its whole path left no room for the counters.
+            ahcmon::output::dashboard::TerminalUi::start(&format!(
+                "replay {}",
+                file.file_name().map_or(file.display().to_string(), |n| n
+                    .to_string_lossy()
+                    .into_owned())
+            ))
+            .context("cannot start the dashboard (try --headless)")?,
         )
     } else {
         None
@@ -1240,6 +1246,11 @@ fn replay(
             }
         }
         monitor.on_frame(&frame, &mut files);
+        // Every estimate into the chart: at 10 redraws a second, a replay as fast as the CPU
+        // goes charted only the last second of the log.
+        if let Some(ui) = ui.as_mut() {
+            ui.history.live.sample(&monitor);
+        }
         if progress && size > 0 {
             let pct = (reader.position() * 100 / size) as usize;
             if pct != shown {

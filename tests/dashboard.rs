@@ -358,3 +358,66 @@ fn a_frozen_chart_stands_and_keeps_recording() {
         times.len()
     );
 }
+
+/// At the end of a log whose steady descent gave `excitation_low` on every motor, the panel
+/// still shows the fault and its clearing: they had been pushed out of its four rows.
+#[test]
+fn excitation_low_does_not_push_the_fault_out_of_the_panel() {
+    let log = common::data(
+        "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+    );
+    let (m, d, hist) = state_of(&log, f64::INFINITY);
+    assert!(
+        d.iter()
+            .rev()
+            .take(4)
+            .all(|d| d.event == Event::ExcitationLow),
+        "the log ends with excitation_low decisions"
+    );
+    let s = draw(&m, &d, &hist, 110, 35, false);
+    let panel: String = s
+        .lines()
+        .skip_while(|l| !l.contains("decisions (newest first)"))
+        .take_while(|l| !l.starts_with(" END") && !l.starts_with(" link"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(panel.contains("cleared  motor4"), "{panel}");
+    assert!(panel.matches("excitation_low").count() <= 1, "{panel}");
+}
+
+/// The footer's drop counters are there when they count something, and then fit at 110
+/// columns (all three, always, cut "unknown" off).
+#[test]
+fn the_footer_shows_the_drops_there_are() {
+    let (m, d, hist) = state_at(41.5);
+    let render_with = |counters: ahcmon::link::FrameCounters| {
+        let mut term = Terminal::new(TestBackend::new(110, 35)).unwrap();
+        let link = LinkInfo {
+            name: "udpin:127.0.0.1:14555".into(),
+            rate_hz: 306.0,
+            data_age_s: Some(0.02),
+            counters,
+            ..Default::default()
+        };
+        term.draw(|f| render(f, &m, &d, &hist, &UiState::default(), &link))
+            .unwrap();
+        let buf = term.backend().buffer().clone();
+        (0..110)
+            .map(|x| buf[(x, 34)].symbol().to_string())
+            .collect::<String>()
+    };
+    let clean = render_with(Default::default());
+    assert!(
+        !clean.contains("bad crc") && clean.contains("lost 0"),
+        "{clean}"
+    );
+    let dropped = render_with(ahcmon::link::FrameCounters {
+        unknown_id: 1739,
+        resync: 3,
+        ..Default::default()
+    });
+    assert!(
+        dropped.contains("resync 3 · unknown 1739") && !dropped.contains("bad crc"),
+        "{dropped}"
+    );
+}

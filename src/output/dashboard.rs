@@ -533,10 +533,15 @@ fn chart(
 fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Option<u8>) {
     let n = area.height.saturating_sub(2) as usize;
     let width = area.width.saturating_sub(2) as usize;
+    // `excitation_low` only as the newest: the table's state column says it per actuator, and
+    // a steady end of flight filled the panel with them, pushing the fault out of sight.
     let shown: Vec<(Style, Vec<String>)> = decisions
         .iter()
         .rev()
         .filter(|d| sysid.is_none_or(|s| d.sysid == s))
+        .enumerate()
+        .filter(|(k, d)| *k == 0 || d.event != Event::ExcitationLow)
+        .map(|(_, d)| d)
         .take(n)
         .map(|d| {
             let style = match d.event {
@@ -670,9 +675,20 @@ fn footer(f: &mut Frame, area: Rect, link: &LinkInfo, lost: u64, ui: &UiState) {
         let ids: Vec<String> = link.others_lost.iter().map(u8::to_string).collect();
         format!(" · link lost: sysid {}", ids.join(", "))
     };
+    // The drop counters only when they count something: all three always cut the line at
+    // 110 columns.
+    let drops: String = [
+        ("bad crc", c.bad_crc),
+        ("resync", c.resync),
+        ("unknown", c.unknown_id),
+    ]
+    .iter()
+    .filter(|(_, n)| *n > 0)
+    .map(|(what, n)| format!(" · {what} {n}"))
+    .collect();
     let text = format!(
-        " {}{others} · {:.0} msg/s · age {age} · lost {lost} · bad crc {} resync {} unknown {}",
-        link.name, link.rate_hz, c.bad_crc, c.resync, c.unknown_id,
+        " {}{others} · {:.0} msg/s · age {age} · lost {lost}{drops}",
+        link.name, link.rate_hz,
     );
     // The keys keep their place at the right; the counters give way on a narrow terminal.
     let keys = if ui.paused {
