@@ -155,6 +155,8 @@ pub struct FlightGate {
     pub max_rel_alt_armed: Option<f64>,
     /// Longest stretch taken as airborne (s); 0 if never.
     pub longest_airborne_s: f64,
+    /// Its first and last sample times (vehicle clock, s).
+    pub longest_airborne: Option<(f64, f64)>,
     /// Samples taken as airborne.
     pub airborne_samples: u64,
 }
@@ -412,9 +414,10 @@ impl VehiclePipeline {
         }
         let g = &self.gate;
         Some(
-            if let (true, Some(until)) = (g.longest_airborne_s > 0.0, self.cfg.calibrate_until) {
+            if let (Some((from, to)), Some(until)) = (g.longest_airborne, self.cfg.calibrate_until)
+            {
                 format!(
-                    "airborne for at most {:.1} s, but the calibration stretch was chosen to end at t={until} s: the vehicle had landed (or the data ended) before then, and a stretch must end in flight",
+                    "airborne for at most {:.1} s (from t={from:.2} s to t={to:.2} s), but the calibration stretch was chosen to end at t={until} s: the vehicle had landed (or the data ended) before then, and a stretch must end in flight",
                     g.longest_airborne_s
                 )
             } else if g.longest_airborne_s > 0.0 {
@@ -614,16 +617,30 @@ impl VehiclePipeline {
             // height (not merely not armed long enough, or before the first heartbeat).
             let low = s.rel_alt.is_some_and(|h| h <= self.cfg.airborne_alt_m);
             self.seen_grounded |= info.mav_type.is_some() && (!s.armed || low);
-            self.airborne_since = None;
+            // Where a flight ended, to choose a stretch by (`--calibrate-until`, `calibrate
+            // --until`): the take-off was said, the landing was not.
+            let flew = self
+                .airborne_since
+                .take()
+                .filter(|since| s.t - since >= self.cfg.settle_s);
             match &mut self.stage {
                 Stage::Calibrating { .. } => {
                     sink.message(
                         self.sysid,
-                        "landed during calibration; starting over at the next take-off",
+                        &format!(
+                            "landed at t={:.2} s during calibration; starting over at the next take-off",
+                            s.t
+                        ),
                     );
                     self.stage = Stage::Grounded;
                 }
                 Stage::Running(r) => {
+                    if let Some(since) = flew {
+                        sink.message(
+                            self.sysid,
+                            &format!("landed at t={:.2} s (airborne from t={since:.2} s)", s.t),
+                        );
+                    }
                     r.prev_u = None;
                     r.u_pushed = 0;
                     r.since_gap = 0;
@@ -633,7 +650,10 @@ impl VehiclePipeline {
             return;
         }
         let since = *self.airborne_since.get_or_insert(s.t);
-        self.gate.longest_airborne_s = self.gate.longest_airborne_s.max(s.t - since);
+        if s.t - since >= self.gate.longest_airborne_s {
+            self.gate.longest_airborne_s = s.t - since;
+            self.gate.longest_airborne = Some((since, s.t));
+        }
         match &mut self.stage {
             Stage::Failed => {}
             Stage::Grounded => {
@@ -1029,15 +1049,19 @@ impl VehiclePipeline {
         }
         let base = profile.rate_params();
         // Too few usable samples where the stretch had many: the holes left too few runs.
-        let holes_note = |e: &crate::model::calibrate::CalibrationError| {
-            if gaps > 0 && matches!(e, crate::model::calibrate::CalibrationError::TooFew { .. }) {
-                format!(
-                    "; the stretch had {} samples, but a fit row spans consecutive ones and its {gaps} gaps leave too few unbroken runs (the link loses too many)",
-                    samples.len()
-                )
-            } else {
-                String::new()
-            }
+        let holes_note = |e: &crate::model::calibrate::CalibrationError| match e {
+            crate::model::calibrate::CalibrationError::TooFew { .. } if gaps > 0 => format!(
+                "; the stretch had {} samples, but a fit row spans consecutive ones and its {gaps} gaps leave too few unbroken runs (the link loses too many)",
+                samples.len()
+            ),
+            // In flight time, which a stretch is chosen by.
+            crate::model::calibrate::CalibrationError::TooFew { need, .. } => format!(
+                " (at a sample every {:.0} ms: {:.1} s of flight after the {} s settle)",
+                dt * 1e3,
+                *need as f64 * dt,
+                self.cfg.settle_s
+            ),
+            _ => String::new(),
         };
         let identified = if profile.model.dynamics == Dynamics::Arx {
             // Above ~58 Hz the history, not MAX_DELAY_S, bounds the delay searched.

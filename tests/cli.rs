@@ -713,6 +713,29 @@ fn a_calibration_end_outside_the_flight_is_explained() {
         "{err}"
     );
     assert!(!p.exists());
+    // After the landing: the flight's times are given, to choose an end by.
+    let m = common::data(
+        "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
+    );
+    let (_, _, err) = ahcmon(&["replay", m.to_str().unwrap(), "--headless"]);
+    assert!(
+        err.contains("sysid 1: landed at t=171.87 s (airborne from t=49.37 s)"),
+        "{err}"
+    );
+    let (code, _, err) = ahcmon(&[
+        "calibrate",
+        m.to_str().unwrap(),
+        "--until",
+        "200",
+        "-o",
+        p.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("landed at t=171.87 s during calibration")
+            && err.contains("airborne for at most 122.5 s (from t=49.37 s to t=171.84 s)"),
+        "{err}"
+    );
 }
 
 /// `calibrate` shows the warnings that concern the profile it writes (they were swallowed: a
