@@ -259,6 +259,9 @@ pub struct VehiclePipeline {
     warned_missing_output: bool,
     /// Said once that the samples come too slowly.
     warned_slow: bool,
+    /// The take-off last announced: a calibration retried in the same flight says so instead
+    /// (a slow stream's failed fits repeated "airborne at t=49.43 s" five times).
+    announced_takeoff: Option<f64>,
     /// Why the run failed (said when it happened; repeated in the summary).
     failure: Option<String>,
     /// What the monitor knew when the vehicle last rebooted (for the summary: `last` and
@@ -334,6 +337,7 @@ impl VehiclePipeline {
             active: [None; MAX_ACTUATORS],
             warned_missing_output: false,
             warned_slow: false,
+            announced_takeoff: None,
             failure: None,
             before_reboot: None,
         }
@@ -525,6 +529,7 @@ impl VehiclePipeline {
         self.stage = Stage::Grounded;
         self.armed_since = None;
         self.airborne_since = None;
+        self.announced_takeoff = None;
         self.active = [None; MAX_ACTUATORS];
         // The new boot's take-off is watched or not afresh.
         self.seen_grounded = false;
@@ -619,6 +624,7 @@ impl VehiclePipeline {
             self.seen_grounded |= info.mav_type.is_some() && (!s.armed || low);
             // Where a flight ended, to choose a stretch by (`--calibrate-until`, `calibrate
             // --until`): the take-off was said, the landing was not.
+            self.announced_takeoff = None;
             let flew = self
                 .airborne_since
                 .take()
@@ -685,10 +691,23 @@ impl VehiclePipeline {
                         } else {
                             "calibrating"
                         };
-                        sink.message(
-                            self.sysid,
-                            &format!("airborne at t={since:.2} s; profile {}; {next}", d.source),
-                        );
+                        if self.announced_takeoff.replace(since) == Some(since) {
+                            sink.message(
+                                self.sysid,
+                                &format!(
+                                    "{next} again from t={:.2} s (in the flight since t={since:.2} s)",
+                                    s.t
+                                ),
+                            );
+                        } else {
+                            sink.message(
+                                self.sysid,
+                                &format!(
+                                    "airborne at t={since:.2} s; profile {}; {next}",
+                                    d.source
+                                ),
+                            );
+                        }
                         // Joined a flight under way (a vehicle up for a while, and no sample
                         // on the ground): whatever it flies with now is taken as healthy. A
                         // simulator's flight starts airborne at boot, and is not warned about.

@@ -1480,6 +1480,13 @@ fn a_slow_stream_is_said_to_be_slow() {
         1,
         "{err}"
     );
+    // At 2 Hz each 20 s stretch is too short: the retries in the same flight say so, not a
+    // new take-off each time, and how much flight the fit needs.
+    let two = decimated(25);
+    let (_, _, err) = ahcmon(&["replay", two.to_str().unwrap(), "--headless"]);
+    assert_eq!(err.matches("airborne at t=").count(), 1, "{err}");
+    assert!(err.contains("calibrating again from t="), "{err}");
+    assert!(err.contains("s of flight after the 3 s settle"), "{err}");
     let ten = decimated(5);
     let (code, _, err) = ahcmon(&["replay", ten.to_str().unwrap(), "--headless"]);
     assert_eq!(code, 0, "{err}");
