@@ -153,12 +153,17 @@ pub struct FlightGate {
     /// Longest armed stretch (s) and the highest relative altitude while armed (m).
     pub longest_armed_s: f64,
     pub max_rel_alt_armed: Option<f64>,
-    /// Longest stretch taken as airborne (s); 0 if never.
-    pub longest_airborne_s: f64,
-    /// Its first and last sample times (vehicle clock, s).
+    /// Longest stretch taken as airborne: its first and last sample times (vehicle clock, s).
     pub longest_airborne: Option<(f64, f64)>,
     /// Samples taken as airborne.
     pub airborne_samples: u64,
+}
+
+impl FlightGate {
+    /// How long the longest airborne stretch lasted (s); 0 if never airborne.
+    pub fn longest_airborne_s(&self) -> f64 {
+        self.longest_airborne.map_or(0.0, |(from, to)| to - from)
+    }
 }
 
 /// Counters of the pipeline itself.
@@ -375,7 +380,7 @@ impl VehiclePipeline {
         }
         // Samples were there but unusable: said first, or the landing (or the end of the
         // data) reads as the cause.
-        let airborne = self.gate.longest_airborne_s.max(
+        let airborne = self.gate.longest_airborne_s().max(
             self.airborne_since
                 .zip(self.last_sample_t)
                 .map_or(0.0, |(a, b)| b - a),
@@ -422,12 +427,13 @@ impl VehiclePipeline {
             {
                 format!(
                     "airborne for at most {:.1} s (from t={from:.2} s to t={to:.2} s), but the calibration stretch was chosen to end at t={until} s: the vehicle had landed (or the data ended) before then, and a stretch must end in flight",
-                    g.longest_airborne_s
+                    g.longest_airborne_s()
                 )
-            } else if g.longest_airborne_s > 0.0 {
+            } else if g.longest_airborne_s() > 0.0 {
                 format!(
                     "airborne for at most {:.1} s, and no calibration completed (it starts {} s after take-off; a landing, a reboot or a failed fit, said above, start it over)",
-                    g.longest_airborne_s, self.cfg.settle_s
+                    g.longest_airborne_s(),
+                    self.cfg.settle_s
                 )
             } else if !heartbeat {
                 format!(
@@ -622,9 +628,9 @@ impl VehiclePipeline {
             // height (not merely not armed long enough, or before the first heartbeat).
             let low = s.rel_alt.is_some_and(|h| h <= self.cfg.airborne_alt_m);
             self.seen_grounded |= info.mav_type.is_some() && (!s.armed || low);
+            self.announced_takeoff = None;
             // Where a flight ended, to choose a stretch by (`--calibrate-until`, `calibrate
             // --until`): the take-off was said, the landing was not.
-            self.announced_takeoff = None;
             let flew = self
                 .airborne_since
                 .take()
@@ -656,8 +662,7 @@ impl VehiclePipeline {
             return;
         }
         let since = *self.airborne_since.get_or_insert(s.t);
-        if s.t - since >= self.gate.longest_airborne_s {
-            self.gate.longest_airborne_s = s.t - since;
+        if s.t - since >= self.gate.longest_airborne_s() {
             self.gate.longest_airborne = Some((since, s.t));
         }
         match &mut self.stage {

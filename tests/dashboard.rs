@@ -65,7 +65,6 @@ fn screen(until: f64, w: u16, h: u16, lost: bool) -> String {
 }
 
 fn draw(m: &Monitor, d: &[Decision], hist: &History, w: u16, h: u16, lost: bool) -> String {
-    let mut term = Terminal::new(TestBackend::new(w, h)).unwrap();
     let link = LinkInfo {
         name: "udpin:127.0.0.1:14550".into(),
         rate_hz: 200.0,
@@ -73,7 +72,19 @@ fn draw(m: &Monitor, d: &[Decision], hist: &History, w: u16, h: u16, lost: bool)
         lost,
         ..Default::default()
     };
-    term.draw(|f| render(f, m, d, hist, &UiState::default(), &link))
+    draw_link(m, d, hist, w, h, &link)
+}
+
+fn draw_link(
+    m: &Monitor,
+    d: &[Decision],
+    hist: &History,
+    w: u16,
+    h: u16,
+    link: &LinkInfo,
+) -> String {
+    let mut term = Terminal::new(TestBackend::new(w, h)).unwrap();
+    term.draw(|f| render(f, m, d, hist, &UiState::default(), link))
         .unwrap();
     let buf = term.backend().buffer().clone();
     let mut out = String::new();
@@ -391,7 +402,6 @@ fn excitation_low_does_not_push_the_fault_out_of_the_panel() {
 fn the_footer_shows_the_drops_there_are() {
     let (m, d, hist) = state_at(41.5);
     let render_with = |counters: ahcmon::link::FrameCounters| {
-        let mut term = Terminal::new(TestBackend::new(110, 35)).unwrap();
         let link = LinkInfo {
             name: "udpin:127.0.0.1:14555".into(),
             rate_hz: 306.0,
@@ -399,12 +409,8 @@ fn the_footer_shows_the_drops_there_are() {
             counters,
             ..Default::default()
         };
-        term.draw(|f| render(f, &m, &d, &hist, &UiState::default(), &link))
-            .unwrap();
-        let buf = term.backend().buffer().clone();
-        (0..110)
-            .map(|x| buf[(x, 34)].symbol().to_string())
-            .collect::<String>()
+        let screen = draw_link(&m, &d, &hist, 110, 35, &link);
+        screen.lines().nth(34).unwrap_or_default().to_string()
     };
     let clean = render_with(Default::default());
     assert!(
