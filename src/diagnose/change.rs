@@ -102,20 +102,25 @@ pub struct ChangeTest {
     len: usize,
     /// The shortest changed stretch considered (samples).
     min_samples: usize,
+    /// The residual's colour, learned on healthy stretches (see [`Colour`]).
+    colour: Colour,
 }
 
 impl ChangeTest {
     /// `effects[j]`: actuator j's weighted effect per unit of effective output, `weights`: the
     /// inverse noise std of each measurement row (`rows` of them: 3, or 4 with a_z),
-    /// `capacity`: samples kept, `min_samples`: the shortest stretch a change is fitted on.
+    /// `capacity`: samples kept (at most [`MAX_STORE`]), `min_samples`: the shortest stretch a
+    /// change is fitted on, `colour_memory`: the healthy samples the residual's colour is
+    /// averaged over (it is used once a store's worth, `capacity`, has been learned).
     pub fn new(
         effects: Vec<[f64; 4]>,
         weights: [f64; 4],
         rows: usize,
         capacity: usize,
         min_samples: usize,
+        colour_memory: usize,
     ) -> Self {
-        let capacity = capacity.max(2);
+        let capacity = capacity.clamp(2, MAX_STORE);
         Self {
             effects,
             weights,
@@ -131,12 +136,18 @@ impl ChangeTest {
             head: 0,
             len: 0,
             min_samples: min_samples.max(2),
+            colour: Colour {
+                memory: colour_memory.max(1),
+                needed: capacity,
+                ..Colour::default()
+            },
         }
     }
 
-    /// Store one step's unweighted residual of the healthy model and the commands that acted.
+    /// Store one step's unweighted residual of the healthy model and the commands that acted;
+    /// with `healthy` (nothing under way) the residual's colour learns from it too.
     /// A non-finite value breaks the record: what came before is dropped.
-    pub fn push(&mut self, t: f64, residual: &[f64; 4], u: &[f64]) {
+    pub fn push(&mut self, t: f64, residual: &[f64; 4], u: &[f64], healthy: bool) {
         let l = self.effects.len().min(u.len());
         let finite = residual[..self.rows].iter().all(|v| v.is_finite())
             && u[..l].iter().all(|v| v.is_finite())
@@ -159,6 +170,11 @@ impl ChangeTest {
             *r = x * w;
         }
         e.u[..l].copy_from_slice(&u[..l]);
+        if healthy {
+            self.colour.learn(&e.r, self.rows);
+        } else {
+            self.colour.break_history();
+        }
         let cap = self.buf.len();
         self.buf[self.head] = e;
         self.head = (self.head + 1) % cap;
@@ -168,6 +184,12 @@ impl ChangeTest {
     /// Forget the stored residuals (a gap in the telemetry, a restart).
     pub fn clear(&mut self) {
         self.len = 0;
+        self.colour.break_history();
+    }
+
+    /// Whether the residual's colour has been learned (the test whitens with it).
+    pub fn colour_learned(&self) -> bool {
+        self.colour.learned >= self.colour.needed
     }
 
     pub fn len(&self) -> usize {
@@ -346,6 +368,211 @@ impl ChangeTest {
             ramp_since: self.buf[(self.head + cap - ramp[j].1.max(1)) % cap].t,
         })
     }
+
+    /// Actuator `j`'s gain and offset changes over the newest `samples` stored, compared with
+    /// the residual whitened by its learned colour (generalised least squares; `None` until
+    /// the colour is learned). Wind and slow model error carry over from one sample to the
+    /// next, so the plain fit weighs what they share with a slowly moving command; whitened,
+    /// the command's sample-to-sample moves, where a gain and an offset differ, weigh in full.
+    /// No allocation.
+    pub fn whitened_gain_or_offset(&self, j: usize, samples: usize) -> Option<KindFit> {
+        if !self.colour_learned() || j >= self.effects.len() {
+            return None;
+        }
+        let (cap, rows) = (self.buf.len(), self.rows);
+        let n = samples.min(self.len);
+        if n < self.min_samples {
+            return None;
+        }
+        let w = self.colour.whitening(rows, true);
+        let b = &self.effects[j];
+        // Oldest of the stretch first: the residual's filter runs over the whole store (its
+        // state at the stretch's start is the healthy past's), each regressor's from zero at
+        // the stretch's start (zero before it).
+        let entry = |k: usize| &self.buf[(self.head + cap - self.len + k) % cap];
+        let start = self.len - n;
+        let (mut pr, mut pg, mut po) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+        let (mut gy, mut gx, mut oy, mut ox, mut base) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut go, mut su) = (0.0, 0.0);
+        for k in 0..self.len {
+            let e = entry(k);
+            let inside = k >= start;
+            let u = e.u[j];
+            if inside {
+                su += u;
+            }
+            for (i, wi) in w.iter().enumerate().take(rows) {
+                let y = (e.r[i] - pr[i]) * wi.scale;
+                pr[i] = wi.theta * pr[i] + wi.gain * e.r[i];
+                if !inside {
+                    continue;
+                }
+                let (xg, xo) = (b[i] * u, b[i]);
+                let g = (xg - pg[i]) * wi.scale;
+                let o = (xo - po[i]) * wi.scale;
+                pg[i] = wi.theta * pg[i] + wi.gain * xg;
+                po[i] = wi.theta * po[i] + wi.gain * xo;
+                gy += g * y;
+                gx += g * g;
+                oy += o * y;
+                ox += o * o;
+                go += g * o;
+                base += y * y;
+            }
+        }
+        if !(gx > 0.0 && ox > 0.0) {
+            return None;
+        }
+        let (gain_drop, offset_drop) = (gy * gy / gx, oy * oy / ox);
+        let det = gx * ox - go * go;
+        let mixed_drop = if det > 1e-9 * gx * ox {
+            let (a, d) = ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det);
+            a * gy + d * oy
+        } else {
+            gain_drop.max(offset_drop)
+        };
+        let (kind, value, drop, other) = if offset_drop > gain_drop {
+            (ChangeKind::Offset, oy / ox, offset_drop, gain_drop)
+        } else {
+            (ChangeKind::Gain, 1.0 + gy / gx, gain_drop, offset_drop)
+        };
+        let noise_var = ((base - drop) / (n * rows) as f64).max(0.0);
+        if !(noise_var > 0.0 && drop.is_finite() && mixed_drop.is_finite()) {
+            return None;
+        }
+        Some(KindFit {
+            kind,
+            value,
+            margin: (drop - other) / noise_var,
+            mixed_margin: (mixed_drop - drop) / noise_var,
+            command_mean: su / n as f64,
+        })
+    }
+}
+
+/// [`ChangeTest::whitened_gain_or_offset`]'s answer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KindFit {
+    /// Gain or offset, whichever fits the whitened residual better, and its value.
+    pub kind: ChangeKind,
+    pub value: f64,
+    /// Twice the log likelihood ratio over the other kind, and of the pair (both together)
+    /// over this one, in the whitened residual's noise.
+    pub margin: f64,
+    pub mixed_margin: f64,
+    pub command_mean: f64,
+}
+
+/// The most samples a [`ChangeTest`] keeps (its pass keeps a few per-sample rows on the stack).
+pub const MAX_STORE: usize = 600;
+
+/// Largest AR(1) coefficient the colour takes (a slower colour is read as 0.99).
+const PHI_MAX: f64 = 0.99;
+
+/// One row's innovation filter: prediction `h' = theta h + gain x`, output `(x - h) scale`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Whiten {
+    theta: f64,
+    gain: f64,
+    scale: f64,
+}
+
+const IDENTITY: Whiten = Whiten {
+    theta: 0.0,
+    gain: 0.0,
+    scale: 1.0,
+};
+
+/// The healthy residual's colour per row, as an AR(1) part (wind and slow model error: it
+/// carries over from one sample to the next) plus a white part (sensor noise), from
+/// exponentially weighted autocovariances at lags 0-3. The AR coefficient is the lag-3 over
+/// lag-2 ratio: the gyro's noise enters the one-step residual twice (now and through the
+/// previous rate), which correlates lags 0 and 1 only (as `calibrate` reads the wind).
+#[derive(Debug, Clone, Copy, Default)]
+struct Colour {
+    mean: [f64; 4],
+    /// Autocovariances at lags 0..=3 per row.
+    cov: [[f64; 4]; 4],
+    /// The previous three residuals (newest first) while consecutive and healthy.
+    history: [[f64; 4]; 3],
+    history_len: usize,
+    /// Samples learned, the averaging memory, and how many make the colour usable.
+    learned: usize,
+    memory: usize,
+    needed: usize,
+}
+
+impl Colour {
+    fn learn(&mut self, r: &[f64; 4], rows: usize) {
+        if self.history_len == 3 {
+            let a = 1.0 / (self.learned + 1).min(self.memory) as f64;
+            for (i, ri) in r.iter().enumerate().take(rows) {
+                let mean = &mut self.mean[i];
+                *mean += a * (ri - *mean);
+                let x = ri - *mean;
+                // Lags 1-3 from the history, about the same mean.
+                let lagged = [
+                    x,
+                    self.history[0][i] - *mean,
+                    self.history[1][i] - *mean,
+                    self.history[2][i] - *mean,
+                ];
+                for (cov, past) in self.cov[i].iter_mut().zip(lagged) {
+                    *cov += a * (x * past - *cov);
+                }
+            }
+            self.learned += 1;
+        }
+        self.history = [*r, self.history[0], self.history[1]];
+        self.history_len = (self.history_len + 1).min(3);
+    }
+
+    /// A gap, a restart or a stretch under way: the lags start again.
+    fn break_history(&mut self) {
+        self.history_len = 0;
+    }
+
+    /// Each row's innovation filter (the steady-state Kalman filter of the AR(1) part seen
+    /// through the white part); the identity until learned.
+    fn whitening(&self, rows: usize, learned: bool) -> [Whiten; 4] {
+        let mut w = [IDENTITY; 4];
+        if !learned {
+            return w;
+        }
+        for (wi, c) in w.iter_mut().zip(&self.cov).take(rows) {
+            let [g0, _, g2, g3] = *c;
+            if !(g0 > 0.0 && g0.is_finite()) {
+                continue;
+            }
+            let phi = if g2 > 0.0 && g3 > 0.0 {
+                (g3 / g2).min(PHI_MAX)
+            } else {
+                0.0
+            };
+            // The AR part's variance, at most 99 % of the whole.
+            let ar = if phi > 0.0 {
+                (g2 / (phi * phi)).min(0.99 * g0)
+            } else {
+                0.0
+            };
+            let white = g0 - ar;
+            let fresh = ar * (1.0 - phi * phi);
+            // Steady-state prediction variance: P² + P (v (1 - φ²) - q) - q v = 0.
+            let bq = white * (1.0 - phi * phi) - fresh;
+            let p = 0.5 * (-bq + (bq * bq + 4.0 * fresh * white).sqrt());
+            let k = p / (p + white);
+            let scale = 1.0 / (p + white).sqrt();
+            if !(k.is_finite() && scale.is_finite()) {
+                continue;
+            }
+            *wi = Whiten {
+                theta: phi * (1.0 - k),
+                gain: phi * k,
+                scale,
+            };
+        }
+        w
+    }
 }
 
 #[cfg(test)]
@@ -366,7 +593,7 @@ mod tests {
     /// commands varying about 0.5; returns the test after `steps`.
     fn run(j: usize, kind: ChangeKind, theta: f64, onset: usize, steps: usize) -> ChangeTest {
         let b = effects();
-        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10);
+        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10, 1);
         let mut rng = Rng::new(7);
         for k in 0..steps {
             let t = k as f64 * 0.02;
@@ -386,7 +613,7 @@ mod tests {
             for i in 0..3 {
                 r[i] = b[j][i] * s + 0.05 * rng.normal();
             }
-            test.push(t, &r, &u);
+            test.push(t, &r, &u, false);
         }
         test
     }
@@ -414,7 +641,7 @@ mod tests {
     /// noise 0.02 a row and a store of `capacity` samples.
     fn offset_change(capacity: usize, seed: u64, offset: impl Fn(f64) -> f64) -> Reading {
         let b = effects();
-        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, capacity, 10);
+        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, capacity, 10, 1);
         let mut rng = Rng::new(seed);
         for k in 0..350 {
             let t = k as f64 * 0.02;
@@ -426,7 +653,7 @@ mod tests {
             for i in 0..3 {
                 r[i] = b[1][i] * s + 0.02 * rng.normal();
             }
-            test.push(t, &r, &u);
+            test.push(t, &r, &u, false);
         }
         test.evaluate().unwrap()
     }
@@ -488,7 +715,7 @@ mod tests {
         // the 20 the diagnosis asks for.
         for seed in 1..20 {
             let b = effects();
-            let mut test = ChangeTest::new(b, [1.0; 4], 3, 300, 10);
+            let mut test = ChangeTest::new(b, [1.0; 4], 3, 300, 10, 1);
             let mut rng = Rng::new(seed);
             for k in 0..300 {
                 let t = k as f64 * 0.02;
@@ -498,7 +725,7 @@ mod tests {
                     0.5,
                 ];
                 let r = [rng.normal(), rng.normal(), rng.normal(), 0.0];
-                test.push(t, &r, &u);
+                test.push(t, &r, &u, false);
             }
             let r = test.evaluate().unwrap();
             assert!(
@@ -549,7 +776,7 @@ mod tests {
         // autocorrelation is φ (0 for white noise), within sampling error.
         for phi in [0.0f64, 0.5, 0.9] {
             let b = effects();
-            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 2000, 10);
+            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 2000, 10, 1);
             let mut rng = Rng::new(11);
             let mut w = [0.0; 3];
             for k in 0..2000 {
@@ -561,7 +788,7 @@ mod tests {
                     w[i] = phi * w[i] + (1.0 - phi * phi).sqrt() * 0.05 * rng.normal();
                     r[i] = b[0][i] * s + w[i];
                 }
-                test.push(t, &r, &u);
+                test.push(t, &r, &u, false);
             }
             let r = test.evaluate().unwrap();
             assert_eq!((r.actuator, r.kind), (0, ChangeKind::Gain), "{r:?}");
@@ -576,7 +803,7 @@ mod tests {
         // leaves far more. A pure gain change gains nothing from the second unknown.
         let b = effects();
         let fit = |mixed: bool| {
-            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10);
+            let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 400, 10, 1);
             let mut rng = Rng::new(4);
             for k in 0..400 {
                 let t = k as f64 * 0.02;
@@ -590,7 +817,7 @@ mod tests {
                 for i in 0..3 {
                     r[i] = b[0][i] * s + 0.05 * rng.normal();
                 }
-                test.push(t, &r, &u);
+                test.push(t, &r, &u, false);
             }
             test.evaluate().unwrap()
         };
@@ -618,12 +845,135 @@ mod tests {
     fn a_non_finite_residual_drops_the_record_and_too_few_samples_read_nothing() {
         let mut test = run(0, ChangeKind::Gain, 0.5, 100, 300);
         assert!(test.evaluate().is_some());
-        test.push(9.0, &[f64::NAN, 0.0, 0.0, 0.0], &[0.5; 3]);
+        test.push(9.0, &[f64::NAN, 0.0, 0.0, 0.0], &[0.5; 3], false);
         assert!(test.is_empty());
         assert_eq!(test.evaluate(), None);
         for k in 0..5 {
-            test.push(10.0 + k as f64 * 0.02, &[0.1, 0.0, 0.0, 0.0], &[0.5; 3]);
+            test.push(
+                10.0 + k as f64 * 0.02,
+                &[0.1, 0.0, 0.0, 0.0],
+                &[0.5; 3],
+                false,
+            );
         }
         assert_eq!(test.evaluate(), None);
+    }
+
+    /// A residual of `steps` samples: an AR(1) part (coefficient `phi`, stationary std
+    /// `ar_std`) plus white noise (`white_std`) on each of three rows.
+    fn coloured(
+        rng: &mut Rng,
+        steps: usize,
+        phi: f64,
+        ar_std: f64,
+        white_std: f64,
+    ) -> Vec<[f64; 4]> {
+        let fresh = ar_std * (1.0 - phi * phi).sqrt();
+        let mut g = [0.0f64; 3];
+        (0..steps)
+            .map(|_| {
+                let mut r = [0.0; 4];
+                for i in 0..3 {
+                    g[i] = phi * g[i] + fresh * rng.normal();
+                    r[i] = g[i] + white_std * rng.normal();
+                }
+                r
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_learned_colour_whitens_a_coloured_residual() {
+        let mut rng = Rng::new(3);
+        let mut test = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
+        // Wind-like: most of the variance in a slow AR(1) part.
+        let (phi, ar, white) = (0.97, 1.0, 0.5);
+        for (k, r) in coloured(&mut rng, 6000, phi, ar, white).iter().enumerate() {
+            test.push(k as f64 * 0.02, r, &[0.5; 3], true);
+        }
+        assert!(test.colour_learned());
+        let w = test.colour.whitening(3, true);
+        // The filter applied to a fresh stretch of the same process: unit variance, no
+        // lag-one correlation left (before: about phi·ar²/(ar² + white²) = 0.78).
+        let fresh = coloured(&mut rng, 20000, phi, ar, white);
+        for (i, wi) in w.iter().enumerate().take(3) {
+            let mut p = 0.0;
+            let out: Vec<f64> = fresh
+                .iter()
+                .map(|r| {
+                    let e = (r[i] - p) * wi.scale;
+                    p = wi.theta * p + wi.gain * r[i];
+                    e
+                })
+                .collect();
+            let n = out.len() as f64;
+            let var = out.iter().map(|e| e * e).sum::<f64>() / n;
+            let lag1 = out.windows(2).map(|x| x[0] * x[1]).sum::<f64>() / n / var;
+            assert!((var - 1.0).abs() < 0.1, "row {i}: variance {var}");
+            assert!(lag1.abs() < 0.1, "row {i}: lag-one correlation {lag1}");
+        }
+    }
+
+    /// A gain or an offset change of actuator 0 from step 1400 of 1800 (the store keeps 100
+    /// samples from before it), under a wind-like
+    /// residual (its slow part 10 times the sensor noise), with the command moving a few per
+    /// cent about 0.5 (a hovering motor's).
+    fn hover_change(kind: ChangeKind, theta: f64, seed: u64) -> ChangeTest {
+        let b = effects();
+        let mut rng = Rng::new(seed);
+        let mut test = ChangeTest::new(b.clone(), [1.0; 4], 3, 500, 10, 3000);
+        let residual = coloured(&mut rng, 1800, 0.97, 0.1, 0.01);
+        for (k, r) in residual.iter().enumerate() {
+            let t = k as f64 * 0.02;
+            let u: Vec<f64> = (0..3)
+                .map(|i| 0.5 + 0.04 * ((t * (7.0 + i as f64)).sin() + rng.normal()))
+                .collect();
+            let s = match (k >= 1400, kind) {
+                (false, _) => 0.0,
+                (true, ChangeKind::Gain) => (theta - 1.0) * u[0],
+                (true, _) => theta,
+            };
+            let mut r = *r;
+            for i in 0..3 {
+                r[i] += b[0][i] * s;
+            }
+            test.push(t, &r, &u, k < 1400);
+        }
+        test
+    }
+
+    #[test]
+    fn a_hovering_motors_gain_and_offset_are_told_apart_on_the_whitened_residual() {
+        // An offset of -0.15 at a command of 0.5 moves the output as a gain of 0.7 does.
+        for (kind, theta) in [(ChangeKind::Offset, -0.15), (ChangeKind::Gain, 0.7)] {
+            let mut clear = 0;
+            for seed in 1..=10 {
+                let test = hover_change(kind, theta, seed);
+                let fit = test
+                    .whitened_gain_or_offset(0, 400)
+                    .expect("colour learned");
+                assert_eq!(fit.kind, kind, "seed {seed}: {fit:?}");
+                // (The offset's level is what the slow wind hides most: 0.043 at worst here.)
+                assert!((fit.value - theta).abs() < 0.06, "seed {seed}: {fit:?}");
+                assert!(fit.margin >= 10.0, "seed {seed}: {fit:?}");
+                assert!(fit.mixed_margin < 20.0, "seed {seed}: {fit:?}");
+                clear += usize::from(fit.margin >= 20.0);
+                // The plain fit cannot tell them apart here (it picks either).
+                let plain = test.evaluate().expect("a reading");
+                assert!(
+                    plain.margin_over(plain.next_kind_drop) < 5.0,
+                    "seed {seed}: {plain:?}"
+                );
+            }
+            assert!(clear >= 9, "{kind:?}: clear on {clear} of 10");
+        }
+    }
+
+    #[test]
+    fn without_a_learned_colour_there_is_no_whitened_reading() {
+        // Everything pushed while under way: nothing learned.
+        let test = run(0, ChangeKind::Gain, 0.6, 200, 350);
+        assert!(!test.colour_learned());
+        assert_eq!(test.whitened_gain_or_offset(0, 150), None);
     }
 }

@@ -40,7 +40,7 @@
 //! mismatch (`ahcmon thresholds`), never on the fault scenarios; a profile without a
 //! `gain_threshold` has no gain term.
 
-use super::change::{ChangeKind, ChangeTest, Reading};
+use super::change::{ChangeKind, ChangeTest, KindFit, Reading};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::telemetry::{Profile, Role};
 use serde::Serialize;
@@ -287,6 +287,9 @@ struct ActuatorState {
     /// better than either alone: a later reading of one of them alone is not its class (see
     /// `step_class_of`).
     mixed_seen: bool,
+    /// The class the change test has read clearly for a motor's fault in force (see
+    /// `still_read` in `update`).
+    data_seen: Option<FaultClass>,
 }
 
 impl ActuatorState {
@@ -298,6 +301,7 @@ impl ActuatorState {
         self.borrowed = 0;
         self.alternative = None;
         self.mixed_seen = false;
+        self.data_seen = None;
     }
 }
 
@@ -365,7 +369,9 @@ const CHANGE_MIN_S: f64 = 0.2;
 /// Longest hole in the telemetry the stored residuals are kept across (s).
 const MAX_HOLE_S: f64 = 1.0;
 /// At most this many residuals are kept, whatever the rate (the test's cost is linear in it).
-const CHANGE_MAX_SAMPLES: usize = 600;
+const CHANGE_MAX_SAMPLES: usize = super::change::MAX_STORE;
+/// The healthy stretch over which the residual's colour is averaged (s).
+const COLOUR_MEMORY_S: f64 = 60.0;
 
 /// The change test's answer counts when the best change beats the alternative by this much
 /// (`Reading::margin_over`: twice the log likelihood ratio over the independent samples, so
@@ -429,6 +435,7 @@ impl Diagnoser {
             profile.measurements(),
             capacity,
             ((CHANGE_MIN_S / dt).round() as usize).max(5),
+            (COLOUR_MEMORY_S / dt).round() as usize,
         );
         let params = DiagnosisParams {
             threshold: profile.diagnosis.threshold,
@@ -457,7 +464,16 @@ impl Diagnoser {
     /// Feed the healthy model's residual of this step (`VehicleFilters::healthy_residual`) and
     /// the commands that acted, before `update`.
     pub fn observe(&mut self, t: f64, residual: &[f64; 4], u: &[f64]) {
-        self.change.push(t, residual, u);
+        let healthy = !self.under_way();
+        self.change.push(t, residual, u, healthy);
+    }
+
+    /// A fault in force, or a detector's statistic above zero: the change test reads the data
+    /// (and the residual's colour stops learning from them).
+    fn under_way(&self) -> bool {
+        self.actuators
+            .iter()
+            .any(|st| st.active.is_some() || st.channels.iter().any(|c| c.cusum > 0.0 || c.alarm))
     }
 
     /// A new flight or a restart: the stored residuals belong to another one.
@@ -470,6 +486,7 @@ impl Diagnoser {
         self.change.clear();
         for st in &mut self.actuators {
             st.mixed_seen = false;
+            st.data_seen = None;
         }
     }
 
@@ -509,8 +526,24 @@ impl Diagnoser {
     fn step_class_of(&self, j: usize, mixed_vetoes: bool) -> Option<FaultClass> {
         let r = self.reading.filter(|r| r.actuator == j)?;
         let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
-        if !long || r.margin_over(r.next_kind_drop) < DATA_MARGIN {
+        // A motor's gain or offset is told apart on the whitened residual.
+        let whitened = self.whitened_kind(&r);
+        let margin = whitened.map_or(r.margin_over(r.next_kind_drop), |f| f.margin);
+        if !long || margin < DATA_MARGIN {
             return None;
+        }
+        if let Some(f) = whitened {
+            if mixed_vetoes && (f.mixed_margin >= DATA_MARGIN || self.actuators[j].mixed_seen) {
+                return None;
+            }
+            let p = &self.params;
+            return match f.kind {
+                ChangeKind::Gain if f.value < 1.0 - p.loe_tau => {
+                    Some(FaultClass::LossOfEffectiveness)
+                }
+                ChangeKind::Offset if f.value.abs() > p.bias_tau => Some(FaultClass::Bias),
+                _ => None,
+            };
         }
         // A gain and an offset together fitting clearly better is no single kind (the SITL
         // servo faults scale the PWM about 1000 µs: about the 1500 µs trim, both).
@@ -530,10 +563,12 @@ impl Diagnoser {
         let p = &self.params;
         match r.kind {
             ChangeKind::Gain if r.value < 1.0 - p.loe_tau => Some(FaultClass::LossOfEffectiveness),
-            // Not for a motor or throttle: hovering, its command barely moves, and a gain and an
-            // offset differ only through that; on the SITL quad's motor gain fault the residual
-            // of a model that is not the vehicle favoured an offset for seconds. The motor prior
-            // (and the decision's note on what else fits) stands there.
+            // A motor or throttle only on the whitened residual (above): hovering, its command
+            // barely moves, and a gain and an offset differ only through that; the plain fit
+            // then weighs what the wind shares with the slowly moving command (on the
+            // simulated quad's motor offset it read a gain of 0.75 as often as the offset).
+            // Before the residual's colour is learned the motor prior (and the decision's note
+            // on what else fits) stands there.
             ChangeKind::Offset if r.value.abs() > p.bias_tau && self.is_angle[j] => {
                 Some(FaultClass::Bias)
             }
@@ -641,18 +676,29 @@ impl Diagnoser {
         }
     }
 
+    /// A motor's (or throttle's) gain or offset reading, compared on the whitened residual:
+    /// `None` for an angle output, a stuck reading, or before the residual's colour is learned.
+    fn whitened_kind(&self, r: &Reading) -> Option<KindFit> {
+        if self.is_angle[r.actuator] || !matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset) {
+            return None;
+        }
+        self.change.whitened_gain_or_offset(r.actuator, r.samples)
+    }
+
     /// What the change test reads for actuator `j`, for a decision's detail.
     fn data_note(&self, j: usize) -> Option<String> {
         let r = self.reading.filter(|r| r.actuator == j)?;
-        let what = match r.kind {
+        let whitened = self.whitened_kind(&r);
+        let (kind, value) = whitened.map_or((r.kind, r.value), |f| (f.kind, f.value));
+        let what = match kind {
             _ if self.data_drift(&r) => format!(
                 "an offset growing {:+.3} a second (a drift; {:+.3} so far)",
                 r.ramp_rate,
                 r.ramp_rate * r.ramp_samples as f64 * self.dt
             ),
-            ChangeKind::Gain => format!("a gain of {:.2}", r.value),
-            ChangeKind::Offset => format!("an offset of {:+.3}", r.value),
-            ChangeKind::Stuck => format!("an output stuck at {:.3}", r.value),
+            ChangeKind::Gain => format!("a gain of {:.2}", value),
+            ChangeKind::Offset => format!("an offset of {:+.3}", value),
+            ChangeKind::Stuck => format!("an output stuck at {:.3}", value),
         };
         // A change older than the stored stretch started before its first sample.
         let (samples, start) = if self.data_drift(&r) {
@@ -665,11 +711,10 @@ impl Diagnoser {
         } else {
             "since"
         };
+        let margin = whitened.map_or(r.margin_over(r.next_kind_drop), |f| f.margin);
         let how = if self.data_class(j).is_some() {
             "clearly"
-        } else if r.margin_over(r.next_kind_drop) >= DATA_MARGIN
-            && r.samples as f64 * self.dt >= CLASS_MIN_S
-        {
+        } else if margin >= DATA_MARGIN && r.samples as f64 * self.dt >= CLASS_MIN_S {
             // A motor's offset, a gain change under the loss tolerance, or a kind alone after
             // the pair fitted clearly better (`mixed_seen`): not a class.
             "(not taken as the class)"
@@ -951,10 +996,7 @@ impl Diagnoser {
         }
         // The change test, only while something is under way (its cost is the horizon's length
         // times the actuators), names the actuator the attribution starts from.
-        let under_way = self
-            .actuators
-            .iter()
-            .any(|st| st.active.is_some() || st.channels.iter().any(|c| c.cusum > 0.0 || c.alarm));
+        let under_way = self.under_way();
         self.reading = if warm && under_way {
             self.change.evaluate()
         } else {
@@ -1305,10 +1347,38 @@ impl Diagnoser {
                     // class or not) is gamma swinging through zero as it converges: the SITL
                     // servo 1 hover read stuck for 3 s, the data an offset (with a gain).
                     let swinging = c == FaultClass::Stuck && self.data_read_unstuck(j);
+                    // Likewise a motor's loss or offset while the whitened data still fit that
+                    // kind best, clearly or not, or have read it clearly during this fault,
+                    // and do not clearly read another class: the filters cannot tell a
+                    // hovering motor's gain from its offset (their reading is the motor
+                    // prior's), and what tells the data's apart from the wind is mostly the
+                    // step, which leaves the 6 s store (the quad's motor 4 offset, read
+                    // clearly 2 s after its onset, went back to the filters' loss at onset + 8 s
+                    // and to bias again at + 13 s).
+                    let data_class = self.data_class(j);
+                    if !self.is_angle[j] && data_class.is_some() {
+                        self.actuators[j].data_seen = data_class;
+                    }
+                    let still_read = !self.is_angle[j]
+                        && matches!(prev, FaultClass::Bias | FaultClass::LossOfEffectiveness)
+                        && data_class.is_none_or(|c| c == prev)
+                        && (self.actuators[j].data_seen == Some(prev)
+                            || self
+                                .reading
+                                .filter(|r| r.actuator == j)
+                                .and_then(|r| self.whitened_kind(&r))
+                                .is_some_and(|f| match (prev, f.kind) {
+                                    (FaultClass::Bias, ChangeKind::Offset) => true,
+                                    (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => {
+                                        f.value < 1.0 - p.loe_tau
+                                    }
+                                    _ => false,
+                                }));
                     let mut c = if c == FaultClass::Unclassified
                         || unmoved
                         || ukf_warming
                         || still_stuck
+                        || still_read
                         || back
                         || swinging
                     {
