@@ -384,14 +384,18 @@ impl ChangeTest {
         if n < self.min_samples {
             return None;
         }
-        let w = self.colour.whitening(rows, true);
+        let w = self.colour.whitening(rows);
         let b = &self.effects[j];
         // Oldest of the stretch first: the residual's filter runs over the whole store (its
         // state at the stretch's start is the healthy past's), each regressor's from zero at
-        // the stretch's start (zero before it).
+        // the stretch's start (zero before it), all with the same gains.
         let entry = |k: usize| &self.buf[(self.head + cap - self.len + k) % cap];
         let start = self.len - n;
         let (mut pr, mut pg, mut po) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+        let mut pv = [0.0f64; 4];
+        for (p, wi) in pv.iter_mut().zip(&w) {
+            *p = wi.start();
+        }
         let (mut gy, mut gx, mut oy, mut ox, mut base) = (0.0, 0.0, 0.0, 0.0, 0.0);
         let (mut go, mut su) = (0.0, 0.0);
         for k in 0..self.len {
@@ -402,16 +406,18 @@ impl ChangeTest {
                 su += u;
             }
             for (i, wi) in w.iter().enumerate().take(rows) {
-                let y = (e.r[i] - pr[i]) * wi.scale;
-                pr[i] = wi.theta * pr[i] + wi.gain * e.r[i];
+                let (gain, scale, next) = wi.advance(pv[i]);
+                pv[i] = next;
+                let y = (e.r[i] - pr[i]) * scale;
+                pr[i] = wi.phi * (pr[i] + gain * (e.r[i] - pr[i]));
                 if !inside {
                     continue;
                 }
                 let (xg, xo) = (b[i] * u, b[i]);
-                let g = (xg - pg[i]) * wi.scale;
-                let o = (xo - po[i]) * wi.scale;
-                pg[i] = wi.theta * pg[i] + wi.gain * xg;
-                po[i] = wi.theta * po[i] + wi.gain * xo;
+                let g = (xg - pg[i]) * scale;
+                let o = (xo - po[i]) * scale;
+                pg[i] = wi.phi * (pg[i] + gain * (xg - pg[i]));
+                po[i] = wi.phi * (po[i] + gain * (xo - po[i]));
                 gy += g * y;
                 gx += g * g;
                 oy += o * y;
@@ -463,25 +469,51 @@ pub struct KindFit {
     pub command_mean: f64,
 }
 
-/// The most samples a [`ChangeTest`] keeps (its pass keeps a few per-sample rows on the stack).
+/// The most samples a [`ChangeTest`] keeps.
 pub const MAX_STORE: usize = 600;
 
 /// Largest AR(1) coefficient the colour takes (a slower colour is read as 0.99).
 const PHI_MAX: f64 = 0.99;
 
-/// One row's innovation filter: prediction `h' = theta h + gain x`, output `(x - h) scale`.
+/// One row's noise model for its innovation filter: an AR(1) part (coefficient `phi`,
+/// stationary variance `ar`, fresh variance per sample `fresh`) seen through white noise
+/// (`white`). The filter starts from the AR part's stationary spread (the wind's level at the
+/// store's first sample is unknown) and its gain settles as the samples come (time-varying
+/// Kalman filter): prediction `h' = phi (h + k (x - h))`, output `(x - h) scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Whiten {
-    theta: f64,
-    gain: f64,
-    scale: f64,
+    phi: f64,
+    ar: f64,
+    fresh: f64,
+    white: f64,
 }
 
+/// No colour: the residual as it is.
 const IDENTITY: Whiten = Whiten {
-    theta: 0.0,
-    gain: 0.0,
-    scale: 1.0,
+    phi: 0.0,
+    ar: 0.0,
+    fresh: 0.0,
+    white: 1.0,
 };
+
+impl Whiten {
+    /// The prediction variance before the first sample.
+    fn start(&self) -> f64 {
+        self.ar
+    }
+
+    /// From the prediction variance `p`: this sample's gain, output scale and the next
+    /// prediction variance.
+    fn advance(&self, p: f64) -> (f64, f64, f64) {
+        let s2 = p + self.white;
+        let k = p / s2;
+        (
+            k,
+            1.0 / s2.sqrt(),
+            self.phi * self.phi * (1.0 - k) * p + self.fresh,
+        )
+    }
+}
 
 /// The healthy residual's colour per row, as an AR(1) part (wind and slow model error: it
 /// carries over from one sample to the next) plus a white part (sensor noise), from
@@ -504,6 +536,11 @@ struct Colour {
 
 impl Colour {
     fn learn(&mut self, r: &[f64; 4], rows: usize) {
+        // (A weighted residual that overflowed would poison the averages for good.)
+        if !r[..rows].iter().all(|x| x.is_finite()) {
+            self.break_history();
+            return;
+        }
         if self.history_len == 3 {
             let a = 1.0 / (self.learned + 1).min(self.memory) as f64;
             for (i, ri) in r.iter().enumerate().take(rows) {
@@ -532,16 +569,16 @@ impl Colour {
         self.history_len = 0;
     }
 
-    /// Each row's innovation filter (the steady-state Kalman filter of the AR(1) part seen
-    /// through the white part); the identity until learned.
-    fn whitening(&self, rows: usize, learned: bool) -> [Whiten; 4] {
+    /// Each row's noise model for the innovation filter; the identity until learned or
+    /// where the row's statistics are not usable.
+    fn whitening(&self, rows: usize) -> [Whiten; 4] {
         let mut w = [IDENTITY; 4];
-        if !learned {
+        if self.learned < self.needed {
             return w;
         }
         for (wi, c) in w.iter_mut().zip(&self.cov).take(rows) {
             let [g0, _, g2, g3] = *c;
-            if !(g0 > 0.0 && g0.is_finite()) {
+            if !(g0 > 0.0 && g0.is_finite() && g2.is_finite() && g3.is_finite()) {
                 continue;
             }
             let phi = if g2 > 0.0 && g3 > 0.0 {
@@ -555,20 +592,11 @@ impl Colour {
             } else {
                 0.0
             };
-            let white = g0 - ar;
-            let fresh = ar * (1.0 - phi * phi);
-            // Steady-state prediction variance: P² + P (v (1 - φ²) - q) - q v = 0.
-            let bq = white * (1.0 - phi * phi) - fresh;
-            let p = 0.5 * (-bq + (bq * bq + 4.0 * fresh * white).sqrt());
-            let k = p / (p + white);
-            let scale = 1.0 / (p + white).sqrt();
-            if !(k.is_finite() && scale.is_finite()) {
-                continue;
-            }
             *wi = Whiten {
-                theta: phi * (1.0 - k),
-                gain: phi * k,
-                scale,
+                phi,
+                ar,
+                fresh: ar * (1.0 - phi * phi),
+                white: g0 - ar,
             };
         }
         w
@@ -892,17 +920,19 @@ mod tests {
             test.push(k as f64 * 0.02, r, &[0.5; 3], true);
         }
         assert!(test.colour_learned());
-        let w = test.colour.whitening(3, true);
+        let w = test.colour.whitening(3);
         // The filter applied to a fresh stretch of the same process: unit variance, no
         // lag-one correlation left (before: about phi·ar²/(ar² + white²) = 0.78).
         let fresh = coloured(&mut rng, 20000, phi, ar, white);
         for (i, wi) in w.iter().enumerate().take(3) {
-            let mut p = 0.0;
+            let (mut h, mut pv) = (0.0, wi.start());
             let out: Vec<f64> = fresh
                 .iter()
                 .map(|r| {
-                    let e = (r[i] - p) * wi.scale;
-                    p = wi.theta * p + wi.gain * r[i];
+                    let (gain, scale, next) = wi.advance(pv);
+                    pv = next;
+                    let e = (r[i] - h) * scale;
+                    h = wi.phi * (h + gain * (r[i] - h));
                     e
                 })
                 .collect();

@@ -1368,7 +1368,9 @@ impl Diagnoser {
                                 .filter(|r| r.actuator == j)
                                 .and_then(|r| self.whitened_kind(&r))
                                 .is_some_and(|f| match (prev, f.kind) {
-                                    (FaultClass::Bias, ChangeKind::Offset) => true,
+                                    (FaultClass::Bias, ChangeKind::Offset) => {
+                                        f.value.abs() > p.bias_tau
+                                    }
                                     (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => {
                                         f.value < 1.0 - p.loe_tau
                                     }
