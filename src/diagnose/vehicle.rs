@@ -358,6 +358,9 @@ pub struct Diagnoser {
     /// while something is under way (a CUSUM above zero, an alarm, a fault in force).
     change: ChangeTest,
     reading: Option<Reading>,
+    /// The reading's gain against offset on the whitened residual, for a motor (see
+    /// `whitened_kind`), computed once with the reading.
+    whitened: Option<KindFit>,
     /// The motor whose offset or stuck output the data pinned, kept while its fault is in
     /// force (a reading that dips for a step must not hand its alarms back).
     pinned: Option<usize>,
@@ -457,6 +460,7 @@ impl Diagnoser {
             prior_decided: [None; 2],
             change,
             reading: None,
+            whitened: None,
             pinned: None,
         }
     }
@@ -679,10 +683,8 @@ impl Diagnoser {
     /// A motor's (or throttle's) gain or offset reading, compared on the whitened residual:
     /// `None` for an angle output, a stuck reading, or before the residual's colour is learned.
     fn whitened_kind(&self, r: &Reading) -> Option<KindFit> {
-        if self.is_angle[r.actuator] || !matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset) {
-            return None;
-        }
-        self.change.whitened_gain_or_offset(r.actuator, r.samples)
+        self.whitened
+            .filter(|_| self.reading.is_some_and(|own| own.actuator == r.actuator))
     }
 
     /// What the change test reads for actuator `j`, for a decision's detail.
@@ -1002,6 +1004,13 @@ impl Diagnoser {
         } else {
             None
         };
+        self.whitened = self.reading.and_then(|r| {
+            if self.is_angle[r.actuator] || !matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset)
+            {
+                return None;
+            }
+            self.change.whitened_gain_or_offset(r.actuator, r.samples)
+        });
         // (Only a reading that clearly names its actuator.)
         if let Some(r) = self.naming_reading() {
             let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
