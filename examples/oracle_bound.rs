@@ -20,7 +20,14 @@
 //! `--nominal-model` uses the profile's `D` and `G` (what the monitor has), `--white-gusts`
 //! drops the gust states and counts each step's gust as white rate noise of the same size
 //! (what the monitor's filters assume). With either, the filter is no longer the efficient one
-//! and its sigma is no longer a bound: read the actual error then.
+//! and its sigma is no longer a bound: read the actual error then. `--known-healthy` adds one:
+//! every actuator's healthy gamma and delta exactly (only the faulty pair, from the onset, is
+//! unknown), the best a monitor's priors and the flight before the fault could tell it.
+//!
+//! `--against ACTUATOR` runs the same oracle a second time, restarting that actuator's pair at
+//! the onset instead, and prints twice the log-likelihood ratio of the measurements since the
+//! onset between the two: how clearly the data name the right actuator (the change test asks
+//! 20 of its own reading).
 //!
 //! `cargo run --release --example oracle_bound -- hexa-x-motor3-loe --seeds 10`
 
@@ -37,14 +44,39 @@ const FLAT_DELTA_VAR: f64 = 1.0;
 /// The tolerance of issue 4's gamma line.
 const TOLERANCE: f64 = 0.05;
 
-/// Per mark: the oracle's sigma of the faulty gamma and its actual error.
-type SeedResult = Vec<(f64, f64)>;
+/// What one seed's oracle gives at one mark.
+#[derive(Clone, Copy)]
+struct Mark {
+    /// Sigma of the restarted actuator's gamma, and its actual error.
+    sigma: f64,
+    error: f64,
+    /// Sigma and actual error of its effective output `gamma u + delta` at that step's command.
+    output_sigma: f64,
+    output_error: f64,
+    /// Log-likelihood of the measurements since the onset under this oracle's hypothesis.
+    log_likelihood: f64,
+}
+
+impl Mark {
+    const NONE: Mark = Mark {
+        sigma: f64::NAN,
+        error: f64::NAN,
+        output_sigma: f64::NAN,
+        output_error: f64::NAN,
+        log_likelihood: f64::NAN,
+    };
+}
+
+type SeedResult = Vec<Mark>;
 
 /// What the oracle is given.
 #[derive(Clone, Copy, Default)]
 struct Knowledge {
     nominal_model: bool,
     white_gusts: bool,
+    /// Every actuator's healthy gamma and delta exactly (only the faulty one's pair, from the
+    /// onset, is unknown): the bound on how well the fault's size can be read, not the health.
+    known_healthy: bool,
 }
 
 fn main() {
@@ -58,6 +90,7 @@ fn run() -> Result<()> {
     let mut args = std::env::args().skip(1);
     let (mut scenario, mut seeds) = (None, 10u64);
     let mut knows = Knowledge::default();
+    let mut against = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--seeds" => {
@@ -66,9 +99,11 @@ fn run() -> Result<()> {
             }
             "--nominal-model" => knows.nominal_model = true,
             "--white-gusts" => knows.white_gusts = true,
+            "--known-healthy" => knows.known_healthy = true,
+            "--against" => against = Some(args.next().context("--against needs an actuator")?),
             "-h" | "--help" => {
                 println!(
-                    "usage: oracle_bound SCENARIO [--seeds N] [--nominal-model] [--white-gusts]"
+                    "usage: oracle_bound SCENARIO [--seeds N] [--nominal-model] [--white-gusts] [--known-healthy] [--against ACTUATOR]"
                 );
                 return Ok(());
             }
@@ -79,29 +114,57 @@ fn run() -> Result<()> {
     let name = scenario.context("usage: oracle_bound SCENARIO [--seeds N]")?;
     let named = ahcmon::scenario::resolve(&name).map_err(|e| anyhow::anyhow!("{e}"))?;
     abrupt_fault(&named)?;
+    let fault = abrupt_fault(&named)?;
     let results = (0..seeds)
-        .map(|i| run_seed(&named, named.scenario.seed + i, knows))
+        .map(|i| run_seed(&named, named.scenario.seed + i, knows, &fault.actuator))
         .collect::<Result<Vec<_>>>()?;
     println!("{name}, {seeds} seeds: the faulty actuator's gamma, oracle Kalman filter");
-    println!("after onset  sigma (mean)  actual RMS error  P(|error| <= {TOLERANCE})");
+    println!(
+        "after onset  sigma (mean)  actual RMS error  P(|error| <= {TOLERANCE})  output: sigma  actual RMS"
+    );
     for (m, at) in MARKS_S.iter().enumerate() {
         let n = results.len() as f64;
-        let sigma = results.iter().map(|r| r[m].0).sum::<f64>() / n;
-        let rms = (results.iter().map(|r| r[m].1.powi(2)).sum::<f64>() / n).sqrt();
-        let within = results
-            .iter()
-            .map(|r| erf(TOLERANCE / (r[m].0 * std::f64::consts::SQRT_2)))
-            .sum::<f64>()
-            / n;
-        println!("{at:>8.0} s   {sigma:>11.4}  {rms:>16.4}  {within:>19.2}");
+        let mean = |f: &dyn Fn(&Mark) -> f64| results.iter().map(|r| f(&r[m])).sum::<f64>() / n;
+        let sigma = mean(&|k| k.sigma);
+        let rms = mean(&|k| k.error.powi(2)).sqrt();
+        let within = mean(&|k| erf(TOLERANCE / (k.sigma * std::f64::consts::SQRT_2)));
+        let output_sigma = mean(&|k| k.output_sigma);
+        let output_rms = mean(&|k| k.output_error.powi(2)).sqrt();
+        println!(
+            "{at:>8.0} s   {sigma:>11.4}  {rms:>16.4}  {within:>19.2}  {output_sigma:>13.4}  {output_rms:>10.4}"
+        );
+    }
+    if let Some(other) = against {
+        // The same oracle restarting another actuator at the onset instead: how much better
+        // the measurements fit the right one (twice the log-likelihood ratio, as the change
+        // test's margins).
+        let wrong = (0..seeds)
+            .map(|i| run_seed(&named, named.scenario.seed + i, knows, &other))
+            .collect::<Result<Vec<_>>>()?;
+        println!(
+            "{} against {other}: 2 ln LR of the data since the onset (min / median over seeds)",
+            fault.actuator
+        );
+        for (m, at) in MARKS_S.iter().enumerate() {
+            let mut lr: Vec<f64> = results
+                .iter()
+                .zip(&wrong)
+                .map(|(r, w)| 2.0 * (r[m].log_likelihood - w[m].log_likelihood))
+                .collect();
+            lr.sort_by(f64::total_cmp);
+            println!("{at:>8.0} s   {:>10.1} / {:>10.1}", lr[0], lr[lr.len() / 2]);
+        }
     }
     Ok(())
 }
 
+/// One seed of the oracle, restarting `restart`'s gamma and delta at the fault's onset (the
+/// faulty actuator, or another for `--against`).
 fn run_seed(
     named: &ahcmon::scenario::NamedScenario,
     seed: u64,
     knows: Knowledge,
+    restart: &str,
 ) -> Result<SeedResult> {
     let (cfg, monitor) = sim_config(named, seed).map_err(|e| anyhow::anyhow!("{e}"))?;
     let fault = abrupt_fault(named)?;
@@ -117,8 +180,8 @@ fn run_seed(
     let white = knows.white_gusts;
     let l = vehicle.actuators.len();
     let f = vehicle
-        .actuator_index(&fault.actuator)
-        .with_context(|| format!("no actuator {}", fault.actuator))?;
+        .actuator_index(restart)
+        .with_context(|| format!("no actuator {restart}"))?;
     let rows = vehicle.measurements();
     let dt = cfg.dt;
     // Gust: g_k = a g_{k-1} + b sd n_k per axis (roll, pitch, yaw, vertical), as in the sim.
@@ -146,12 +209,16 @@ fn run_seed(
         p[(gust0 + i, gust0 + i)] = sd * sd;
     }
     for j in 0..l {
+        // Healthy: gamma 1 and delta 0 (the simulator's truth before any fault).
         z[gamma0 + j] = 1.0;
-        p[(gamma0 + j, gamma0 + j)] = FLAT_GAMMA_VAR;
-        p[(delta0 + j, delta0 + j)] = FLAT_DELTA_VAR;
+        if !knows.known_healthy {
+            p[(gamma0 + j, gamma0 + j)] = FLAT_GAMMA_VAR;
+            p[(delta0 + j, delta0 + j)] = FLAT_DELTA_VAR;
+        }
     }
     let mut restarted = false;
-    let mut out = vec![(f64::NAN, f64::NAN); MARKS_S.len()];
+    let mut out = vec![Mark::NONE; MARKS_S.len()];
+    let mut log_likelihood = 0.0;
     for _ in 0..named.scenario.steps() {
         // The simulator applies the fault from the step that starts at its time on.
         let step_start = sim.time();
@@ -226,9 +293,16 @@ fn run_seed(
         }
         let innovation = &y - &h * &z;
         let s_cov = &h * &p * h.transpose() + &r;
+        let det = s_cov.determinant();
         let s_inv = s_cov
             .try_inverse()
             .context("innovation covariance singular")?;
+        if restarted {
+            log_likelihood -= 0.5
+                * ((innovation.transpose() * &s_inv * &innovation)[0]
+                    + det.ln()
+                    + rows as f64 * (2.0 * std::f64::consts::PI).ln());
+        }
         let k = &p * h.transpose() * s_inv;
         z += &k * innovation;
         // Joseph form: the flat prior spans ten orders of magnitude.
@@ -236,9 +310,17 @@ fn run_seed(
         p = &ikh * &p * ikh.transpose() + &k * &r * k.transpose();
         p = (&p + p.transpose()) * 0.5;
         for (m, at) in MARKS_S.iter().enumerate() {
-            if out[m].0.is_nan() && s.t >= fault.t + at - 1e-9 {
-                let g = gamma0 + f;
-                out[m] = (p[(g, g)].sqrt(), z[g] - s.gamma[f]);
+            if out[m].sigma.is_nan() && s.t >= fault.t + at - 1e-9 {
+                let (g, d, u) = (gamma0 + f, delta0 + f, s.u[f]);
+                let output_var = u * u * p[(g, g)] + 2.0 * u * p[(g, d)] + p[(d, d)];
+                let output_error = (z[g] - s.gamma[f]) * u + z[d] - s.delta[f];
+                out[m] = Mark {
+                    sigma: p[(g, g)].sqrt(),
+                    error: z[g] - s.gamma[f],
+                    output_sigma: output_var.max(0.0).sqrt(),
+                    output_error,
+                    log_likelihood,
+                };
             }
         }
     }
