@@ -25,10 +25,11 @@
 //! from and gives the class when it is clear; a clear reading as large as the calibrated
 //! thresholds say a fault is adds to that actuator's detection statistic; while it pins an
 //! offset or a stuck output on a motor, or a loss on a motor already decided, the other
-//! motors' alarms count as that motor's. A multirotor's readings are searched on the residual
-//! whitened by its learned colour, where a clear margin is honest about the wind: a motor's
-//! offset or stuck output read clearly there counts from the bias tolerance on, and while
-//! the search fits another motor best a motor's first alarm waits for it.
+//! motors' alarms count as that motor's. Until a fault is in force, a multirotor's readings are
+//! searched on the residual whitened by its learned colour, where a clear margin is honest
+//! about the wind: a motor's offset or stuck output read clearly there counts from the bias
+//! tolerance on, and while the search fits another motor best a motor's first alarm waits
+//! for it.
 //!
 //! Angle outputs also have a gain statistic: how far the healthy gain lies outside the filter's
 //! gamma bounds, at a reference deflection (see `update`), attributed the same way.
@@ -364,6 +365,9 @@ pub struct Diagnoser {
     /// The reading's gain against offset on the whitened residual, for a motor (see
     /// `whitened_kind`), computed once with the reading.
     whitened: Option<KindFit>,
+    /// The reading came from the search on the whitened residual (a multirotor whose
+    /// residual's colour is learned; see `ChangeTest::whitened_search`).
+    reading_whitened: bool,
     /// The motor whose offset or stuck output the data pinned, kept while its fault is in
     /// force (a reading that dips for a step must not hand its alarms back).
     pinned: Option<usize>,
@@ -464,6 +468,7 @@ impl Diagnoser {
             change,
             reading: None,
             whitened: None,
+            reading_whitened: false,
             pinned: None,
         }
     }
@@ -610,8 +615,9 @@ impl Diagnoser {
             && -r.margin_over(r.ramp_drop) >= DATA_MARGIN
     }
 
-    /// A motor whose alarm waits for the data: while they clearly name another actuator, or,
-    /// naming none, while every alarming filter reads it as giving more than commanded
+    /// A motor whose alarm waits for the data: while they clearly name another actuator (a
+    /// reading of the whitened search: while it fits another motor best, clearly or not yet),
+    /// or, naming none, while every alarming filter reads it as giving more than commanded
     /// (motors fail low). In the first fraction of a second after a motor fails the filters
     /// can put it on another motor: calm quad X, motor 2 at 0.6 read as motor 1 at gamma 1.53
     /// within 0.24 s; calm hexa X, motor 3 as motor 5's loss; both decided before the change
@@ -629,11 +635,11 @@ impl Diagnoser {
             return false;
         }
         let named = self.naming_reading().map(|r| r.actuator);
-        // On the whitened residual a reading's margin is honest about the wind, so in its first
-        // `CLASS_MIN_S` it is rarely clear yet; while it is that young and fits another motor
-        // best, that motor is still the data's view. (Calm hexa X, motor 5 stuck high: the
-        // MIT-UKF alarmed on motor 6's loss 0.42 s after the onset, while the whitened data,
-        // 0.4 s old and not yet clear, fitted motor 5 stuck.)
+        // On the whitened residual a reading's margin is honest about the wind, so it takes a
+        // while to be clear; while it fits another motor best, clearly or not yet, that motor
+        // is the data's view. (Hexa X, motor 5 stuck high, seeds 1-40: without this the
+        // MIT-UKF's alarm on motor 6's loss was decided 0.44-1.18 s after the onset on 6 more
+        // seeds, while the whitened data, not yet clear, fitted motor 5 stuck.)
         let forming = self.whitened_readings()
             && self
                 .reading
@@ -682,8 +688,9 @@ impl Diagnoser {
     /// Whether a reading's change is as large as the calibrated thresholds say a fault is: a
     /// gain by the gain statistic's measure (`(1 - γ) gain_ref` against `gain_threshold`;
     /// none without one, as for motors), an offset or a stuck output's distance from the
-    /// mean command against `threshold`. The change test's margins alone let gusts through
-    /// (a healthy plane's elevator read as a gain of 0.69 "clearly").
+    /// mean command against `threshold` (against the bias tolerance for a multirotor's motor
+    /// read on the whitened residual, below). The change test's plain margins alone let gusts
+    /// through (a healthy plane's elevator read as a gain of 0.69 "clearly").
     fn beyond_thresholds(&self, r: &Reading) -> bool {
         let p = &self.params;
         // A multirotor motor's offset or stuck output read clearly on the whitened residual
@@ -702,10 +709,9 @@ impl Diagnoser {
         }
     }
 
-    /// The readings come from the whitened search (a multirotor, its residual's colour
-    /// learned).
+    /// The reading in force came from the whitened search.
     fn whitened_readings(&self) -> bool {
-        !self.motors.is_empty() && self.change.colour_learned()
+        self.reading_whitened
     }
 
     /// A motor's (or throttle's) gain or offset reading, compared on the whitened residual:
@@ -1032,14 +1038,23 @@ impl Diagnoser {
         // read against the wind's slow part, which the plain search weighs like independent
         // samples (a hexa motor stuck 0.05 above its command was read as the next motor's loss
         // for a second).
+        // Until a fault is in force: the whitened search reads changes (a step's weight is in
+        // its first samples, where the wind has not yet moved), not a level that has stood
+        // longer than the store, which the whitening takes for the wind's. A decided fault's
+        // level is followed on the plain residual, as the classes have been (hexa motor 5
+        // stuck: with the whitened search going on, once the onset had left the store it
+        // fitted motor 6 stuck instead, and motor 6 was decided on 7 of 10 seeds).
+        let fault_in_force = self.actuators.iter().any(|st| st.active.is_some());
+        let whitened_reading = if warm && under_way && !self.motors.is_empty() && !fault_in_force {
+            self.change.whitened_search()
+        } else {
+            None
+        };
+        self.reading_whitened = whitened_reading.is_some();
         self.reading = if !(warm && under_way) {
             None
-        } else if self.motors.is_empty() {
-            self.change.evaluate()
         } else {
-            self.change
-                .whitened_search()
-                .or_else(|| self.change.evaluate())
+            whitened_reading.or_else(|| self.change.evaluate())
         };
         self.whitened = self.reading.and_then(|r| {
             if self.is_angle[r.actuator] || !matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset)
