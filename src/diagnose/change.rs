@@ -478,8 +478,10 @@ impl ChangeTest {
 
 impl ChangeTest {
     /// The generalised likelihood ratio search of [`ChangeTest::evaluate`] (every actuator,
-    /// kind and change time) on the residual whitened by its learned colour, with each row's
-    /// filter at its steady state: an ARMA(1,1) filter `(1 - φ z⁻¹)/(1 - θ z⁻¹)`, so that a
+    /// kind and change time) on the residual whitened by its learned colour. The residual
+    /// goes through each row's time-varying filter from the wind's stationary spread, the
+    /// regressors (zero before their change) through its steady state, to which it settles
+    /// within the first samples: an ARMA(1,1) filter `(1 - φ z⁻¹)/(1 - θ z⁻¹)`, so that a
     /// regressor started at `τ` comes out as the whole store's filtered regressor less a
     /// geometric tail `α H_τ θ^(k-τ)`, and the sums for every `τ` come from backward
     /// recursions in one pass. `None` until the colour is learned.

@@ -1041,7 +1041,7 @@ impl Diagnoser {
         // Until a fault is in force: the whitened search reads changes (a step's weight is in
         // its first samples, where the wind has not yet moved), not a level that has stood
         // longer than the store, which the whitening takes for the wind's. A decided fault's
-        // level is followed on the plain residual, as the classes have been (hexa motor 5
+        // level is followed by the plain search, as before the whitened one (hexa motor 5
         // stuck: with the whitened search going on, once the onset had left the store it
         // fitted motor 6 stuck instead, and motor 6 was decided on 7 of 10 seeds).
         let fault_in_force = self.actuators.iter().any(|st| st.active.is_some());
