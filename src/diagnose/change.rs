@@ -74,6 +74,102 @@ pub struct Reading {
     pub ramp_since: f64,
 }
 
+/// The kinds of change in the order the searches index them.
+const KINDS: [ChangeKind; 3] = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
+
+/// One hypothesis' best fit over the change times: (drop, samples, θ, residual variance or
+/// sum of squares, mean command).
+type Fit = (f64, usize, f64, f64, f64);
+
+/// The drops and values of a gain, an offset and a stuck output (in [`KINDS`] order), and of
+/// a gain and an offset together, from `Σ g y`, `Σ g²`, `Σ o y`, `Σ o²`, `Σ g o` over a
+/// changed stretch (`g` the gain regressor `b u`, `o` the offset regressor `b`, `y` the
+/// residual); `None` where a regressor is zero or the pair is degenerate.
+#[allow(clippy::type_complexity)]
+fn kind_drops(
+    gy: f64,
+    gx: f64,
+    oy: f64,
+    ox: f64,
+    go: f64,
+) -> ([(Option<f64>, Option<f64>); 3], Option<f64>) {
+    // Gain and offset together: the 2×2 normal equations.
+    let det = gx * ox - go * go;
+    let pair = (det > 1e-9 * gx * ox).then(|| {
+        let (a, d) = ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det);
+        a * gy + d * oy
+    });
+    let mut fits = [(None, None); 3];
+    if gx > 0.0 {
+        fits[0] = (Some(gy * gy / gx), Some(1.0 + gy / gx));
+    }
+    if ox > 0.0 {
+        fits[1] = (Some(oy * oy / ox), Some(oy / ox));
+        // Stuck at θ: r = b (θ - u); the sum of squares left is Σ(r + b u)² - (Σ b(r + b u))²/Σb²,
+        // and Σ(r + b u)² = Σ r² + 2 gy + gx.
+        let sy = oy + go;
+        fits[2] = (Some(sy * sy / ox - 2.0 * gy - gx), Some(sy / ox));
+    }
+    (fits, pair)
+}
+
+/// Keep in `row`, per kind, the best of this stretch's fits from `sums` (see [`kind_drops`]),
+/// recorded as `fit(drop, θ)`, and in `pair_best` the best drop of the pair.
+fn keep_best(
+    row: &mut [Fit; 3],
+    pair_best: &mut f64,
+    sums: [f64; 5],
+    fit: impl Fn(f64, f64) -> Fit,
+) {
+    let [gy, gx, oy, ox, go] = sums;
+    let (fits, pair) = kind_drops(gy, gx, oy, ox, go);
+    if let Some(drop) = pair.filter(|d| d.is_finite() && *d > *pair_best) {
+        *pair_best = drop;
+    }
+    for (slot, (drop, theta)) in row.iter_mut().zip(fits) {
+        if let (Some(drop), Some(theta)) = (drop, theta)
+            && drop.is_finite()
+            && drop > slot.0
+        {
+            *slot = fit(drop, theta);
+        }
+    }
+}
+
+/// The best hypothesis among `best` (per actuator and kind) and the best drops of the others.
+struct Top {
+    actuator: usize,
+    kind: usize,
+    next_kind_drop: f64,
+    next_actuator_drop: f64,
+}
+
+fn top_hypothesis(best: &[[Fit; 3]]) -> Option<Top> {
+    let mut top: Option<(usize, usize)> = None;
+    for (j, row) in best.iter().enumerate() {
+        for (k, h) in row.iter().enumerate() {
+            if h.1 > 0 && top.is_none_or(|(tj, tk)| h.0 > best[tj][tk].0) {
+                top = Some((j, k));
+            }
+        }
+    }
+    let (j, k) = top?;
+    let next_kind_drop = (0..3)
+        .filter(|&kk| kk != k)
+        .map(|kk| best[j][kk].0)
+        .fold(0.0, f64::max);
+    let next_actuator_drop = (0..best.len())
+        .filter(|&jj| jj != j)
+        .flat_map(|jj| best[jj].iter().map(|x| x.0))
+        .fold(0.0, f64::max);
+    Some(Top {
+        actuator: j,
+        kind: k,
+        next_kind_drop,
+        next_actuator_drop,
+    })
+}
+
 impl Reading {
     /// How much better this reading fits than an alternative whose drop is `other`, as a log
     /// likelihood ratio (×2) in the residual's own noise, counting only the independent
@@ -277,31 +373,11 @@ impl ChangeTest {
                     }
                 }
                 let rows = (n * self.rows) as f64;
-                let mut consider = |k: usize, drop: f64, theta: f64| {
-                    if drop.is_finite() && drop > best[j][k].0 {
-                        let var = ((base - drop) / rows).max(0.0);
-                        best[j][k] = (drop, n, theta, var, su / n as f64);
-                    }
-                };
-                // Gain and offset together: the 2×2 normal equations.
-                let det = gx * ox - bbu * bbu;
-                if det > 1e-9 * gx * ox {
-                    let (a, d) = ((gy * ox - bbu * oy) / det, (gx * oy - bbu * gy) / det);
-                    let drop = a * gy + d * oy;
-                    if drop.is_finite() && drop > mixed[j] {
-                        mixed[j] = drop;
-                    }
-                }
-                if gx > 0.0 {
-                    consider(0, gy * gy / gx, 1.0 + gy / gx);
-                }
-                if ox > 0.0 {
-                    consider(1, oy * oy / ox, oy / ox);
-                    // Stuck at θ: r = b (θ - u); the sum of squares left is Σ(r + b u)² - (Σ b(r + b u))²/Σb²,
-                    // and Σ(r + b u)² = base + 2 gy + gx.
-                    let sy = oy + bbu;
-                    consider(2, sy * sy / ox - 2.0 * gy - gx, sy / ox);
-                }
+                let sums = [gy, gx, oy, ox, bbu];
+                keep_best(&mut best[j], &mut mixed[j], sums, |drop, theta| {
+                    let var = ((base - drop) / rows).max(0.0);
+                    (drop, n, theta, var, su / n as f64)
+                });
             }
             // Over the whole store, a drift that began before it: an offset already there and
             // growing (times centred on their mean, so the two are fitted independently). Its
@@ -316,25 +392,8 @@ impl ChangeTest {
                 }
             }
         }
-        let kinds = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
-        let mut top: Option<(usize, usize)> = None;
-        for (j, row) in best.iter().enumerate().take(l) {
-            for (k, h) in row.iter().enumerate() {
-                if h.1 > 0 && top.is_none_or(|(tj, tk)| h.0 > best[tj][tk].0) {
-                    top = Some((j, k));
-                }
-            }
-        }
-        let (j, k) = top?;
-        let h = best[j][k];
-        let next_kind_drop = (0..3)
-            .filter(|&kk| kk != k)
-            .map(|kk| best[j][kk].0)
-            .fold(0.0, f64::max);
-        let next_actuator_drop = (0..l)
-            .filter(|&jj| jj != j)
-            .flat_map(|jj| best[jj].iter().map(|x| x.0))
-            .fold(0.0, f64::max);
+        let (kinds, top) = (KINDS, top_hypothesis(&best[..l])?);
+        let (j, k, h) = (top.actuator, top.kind, best[top.actuator][top.kind]);
         let first = &self.buf[(self.head + cap - h.1) % cap];
         // Lag-one autocorrelation of what the fit leaves, pooled over the rows: gusts and model
         // error make it coloured, and a coloured residual holds fewer independent samples.
@@ -379,8 +438,8 @@ impl ChangeTest {
             samples: h.1,
             drop: h.0,
             noise_var: h.3,
-            next_kind_drop,
-            next_actuator_drop,
+            next_kind_drop: top.next_kind_drop,
+            next_actuator_drop: top.next_actuator_drop,
             mixed_drop: mixed[j],
             ramp_drop: ramp[j].0,
             ramp_rate: ramp[j].2,
@@ -600,49 +659,14 @@ impl ChangeTest {
                     go += bi * bi * sx_u1;
                 }
                 let mean_u = su[j] / m as f64;
-                let mut consider = |k: usize, drop: f64, theta: f64| {
-                    if drop.is_finite() && drop > best[j][k].0 {
-                        best[j][k] = (drop, m, theta, base, mean_u);
-                    }
-                };
-                // Gain and offset together: the 2×2 normal equations.
-                let det = gx * ox - go * go;
-                if det > 1e-9 * gx * ox {
-                    let (a, d) = ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det);
-                    let drop = a * gy + d * oy;
-                    if drop.is_finite() && drop > mixed[j] {
-                        mixed[j] = drop;
-                    }
-                }
-                if gx > 0.0 {
-                    consider(0, gy * gy / gx, 1.0 + gy / gx);
-                }
-                if ox > 0.0 {
-                    consider(1, oy * oy / ox, oy / ox);
-                    let sy = oy + go;
-                    consider(2, sy * sy / ox - 2.0 * gy - gx, sy / ox);
-                }
+                let sums = [gy, gx, oy, ox, go];
+                keep_best(&mut best[j], &mut mixed[j], sums, |drop, theta| {
+                    (drop, m, theta, base, mean_u)
+                });
             }
         }
-        let kinds = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
-        let mut top: Option<(usize, usize)> = None;
-        for (j, row) in best.iter().enumerate().take(l) {
-            for (k, h) in row.iter().enumerate() {
-                if h.1 > 0 && top.is_none_or(|(tj, tk)| h.0 > best[tj][tk].0) {
-                    top = Some((j, k));
-                }
-            }
-        }
-        let (j, k) = top?;
-        let h = best[j][k];
-        let next_actuator_drop = (0..l)
-            .filter(|&jj| jj != j)
-            .flat_map(|jj| best[jj].iter().map(|x| x.0))
-            .fold(0.0, f64::max);
-        let next_kind_drop = (0..3)
-            .filter(|&kk| kk != k)
-            .map(|kk| best[j][kk].0)
-            .fold(0.0, f64::max);
+        let (kinds, top) = (KINDS, top_hypothesis(&best[..l])?);
+        let (j, k, h) = (top.actuator, top.kind, best[top.actuator][top.kind]);
         // In the whitened residual's own noise (about 1 where the colour is right).
         let noise_var = (h.3 - h.0) / (h.1 * rows) as f64;
         if !(noise_var > 0.0 && noise_var.is_finite()) {
@@ -659,9 +683,9 @@ impl ChangeTest {
             noise_var,
             autocorrelation: 0.0,
             command_mean: h.4,
-            next_kind_drop,
+            next_kind_drop: top.next_kind_drop,
             mixed_drop: mixed[j],
-            next_actuator_drop,
+            next_actuator_drop: top.next_actuator_drop,
             ramp_drop: 0.0,
             ramp_rate: 0.0,
             ramp_samples: 0,
