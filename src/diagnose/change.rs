@@ -487,16 +487,12 @@ impl ChangeTest {
             for (i, wi) in w.iter().enumerate().take(rows) {
                 let (gain, scale, next) = wi.advance(pv[i]);
                 pv[i] = next;
-                let y = (e.r[i] - pr[i]) * scale;
-                pr[i] = wi.phi * (pr[i] + gain * (e.r[i] - pr[i]));
+                let y = wi.apply(&mut pr[i], e.r[i], gain, scale);
                 if !inside {
                     continue;
                 }
-                let (xg, xo) = (b[i] * u, b[i]);
-                let g = (xg - pg[i]) * scale;
-                let o = (xo - po[i]) * scale;
-                pg[i] = wi.phi * (pg[i] + gain * (xg - pg[i]));
-                po[i] = wi.phi * (po[i] + gain * (xo - po[i]));
+                let g = wi.apply(&mut pg[i], b[i] * u, gain, scale);
+                let o = wi.apply(&mut po[i], b[i], gain, scale);
                 gy += g * y;
                 gx += g * g;
                 oy += o * y;
@@ -581,8 +577,7 @@ impl ChangeTest {
                 let wi = &w[i];
                 let (gain, scale, next) = wi.advance(spread[i]);
                 spread[i] = next;
-                x.y[i] = (e.r[i] - predicted[i]) * scale;
-                predicted[i] = wi.phi * (predicted[i] + gain * (e.r[i] - predicted[i]));
+                x.y[i] = wi.apply(&mut predicted[i], e.r[i], gain, scale);
                 x.f1[i] = c + alpha * h1_run[i];
                 x.h1[i] = h1_run[i];
                 h1_run[i] = theta * h1_run[i] + 1.0;
@@ -769,6 +764,14 @@ impl Whiten {
             1.0 / s2.sqrt(),
             self.phi * self.phi * (1.0 - k) * p + self.fresh,
         )
+    }
+
+    /// One series' sample `x` through the filter with this sample's `gain` and `scale` (from
+    /// [`Whiten::advance`]): its whitened value, and `predicted` carried to the next sample.
+    fn apply(&self, predicted: &mut f64, x: f64, gain: f64, scale: f64) -> f64 {
+        let y = (x - *predicted) * scale;
+        *predicted = self.phi * (*predicted + gain * (x - *predicted));
+        y
     }
 }
 
@@ -1188,9 +1191,7 @@ mod tests {
                 .map(|r| {
                     let (gain, scale, next) = wi.advance(pv);
                     pv = next;
-                    let e = (r[i] - h) * scale;
-                    h = wi.phi * (h + gain * (r[i] - h));
-                    e
+                    wi.apply(&mut h, r[i], gain, scale)
                 })
                 .collect();
             let n = out.len() as f64;
@@ -1317,9 +1318,7 @@ mod tests {
                     .map(|e| {
                         let (gain, scale, next) = w[i].advance(p);
                         p = next;
-                        let out = (e.r[i] - h) * scale;
-                        h = w[i].phi * (h + gain * (e.r[i] - h));
-                        out
+                        w[i].apply(&mut h, e.r[i], gain, scale)
                     })
                     .collect()
             })

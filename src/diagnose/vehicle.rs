@@ -640,7 +640,7 @@ impl Diagnoser {
         // is the data's view. (Hexa X, motor 5 stuck high, seeds 1-40: without this the
         // MIT-UKF's alarm on motor 6's loss was decided 0.44-1.18 s after the onset on 6 more
         // seeds, while the whitened data, not yet clear, fitted motor 5 stuck.)
-        let forming = self.whitened_readings()
+        let forming = self.reading_whitened
             && self
                 .reading
                 .is_some_and(|r| r.actuator != j && self.is_motor[r.actuator]);
@@ -694,10 +694,10 @@ impl Diagnoser {
     fn beyond_thresholds(&self, r: &Reading) -> bool {
         let p = &self.params;
         // A multirotor motor's offset or stuck output read clearly on the whitened residual
-        // (`whitened_readings`) is judged by the bias tolerance, the smallest offset that is a
+        // (`reading_whitened`) is judged by the bias tolerance, the smallest offset that is a
         // class at all: the margin there is honest about the wind, which the filters'
         // threshold, calibrated on their wander in gusts, has to cover.
-        let size_min = if self.whitened_readings() && self.is_motor[r.actuator] {
+        let size_min = if self.reading_whitened && self.is_motor[r.actuator] {
             p.bias_tau
         } else {
             p.threshold
@@ -707,11 +707,6 @@ impl Diagnoser {
             ChangeKind::Offset => r.value.abs() >= size_min,
             ChangeKind::Stuck => (r.value - r.command_mean).abs() >= size_min,
         }
-    }
-
-    /// The reading in force came from the whitened search.
-    fn whitened_readings(&self) -> bool {
-        self.reading_whitened
     }
 
     /// A motor's (or throttle's) gain or offset reading, compared on the whitened residual:
