@@ -264,14 +264,24 @@ pub fn sandwich_gain<const N: usize, const M: usize>(
     k: &SMatrix<f64, N, M>,
     h: &SparseRows<M, N>,
 ) -> SMatrix<f64, N, N> {
+    let mut out = *x;
+    sandwich_gain_in_place(&mut out, k, h);
+    out
+}
+
+/// [`sandwich_gain`] overwriting `x` (the same arithmetic, no copies of the N×N matrix: the
+/// sensitivity recursions run it for every adapted entry, every step).
+pub fn sandwich_gain_in_place<const N: usize, const M: usize>(
+    x: &mut SMatrix<f64, N, N>,
+    k: &SMatrix<f64, N, M>,
+    h: &SparseRows<M, N>,
+) {
     // Y = G X = X - K (X Hᵀ)ᵀ; then G X Gᵀ = Y - (Y Hᵀ) Kᵀ, built on the upper triangle.
     let xh = h.right_t(x);
-    let y = x - k * xh.transpose();
-    let yh = h.right_t(&y);
-    let mut out = y;
-    out.gemm(-1.0, &yh, &k.transpose(), 1.0);
-    symmetrize(&mut out);
-    out
+    *x -= k * xh.transpose();
+    let yh = h.right_t(x);
+    x.gemm(-1.0, &yh, &k.transpose(), 1.0);
+    symmetrize(x);
 }
 
 #[cfg(test)]

@@ -2,7 +2,10 @@
 //! covariance, the recursive sensitivity of the predicted covariance to each process-noise
 //! entry, and the step-size schedule with restart and floor.
 
-use super::linalg::{SMALL_N, SparseRows, identity_tail_start, sandwich_gain, sandwich_walk};
+use super::linalg::{
+    SMALL_N, SparseRows, identity_tail_start, sandwich_gain, sandwich_gain_in_place, sandwich_walk,
+    sandwich_walk_in_place,
+};
 use nalgebra::{SMatrix, SVector};
 
 /// Largest window the ring buffer holds (the window length itself is a runtime parameter).
@@ -125,6 +128,10 @@ impl<const M: usize> InnovationWindow<M> {
 /// A linear map `X ↦ A X Aᵀ` on symmetric matrices (the sensitivity recursion's transition).
 pub trait Sandwich<const N: usize> {
     fn sandwich(&self, x: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N>;
+    /// `x ← A x Aᵀ`, the same numbers as [`Sandwich::sandwich`].
+    fn sandwich_in_place(&self, x: &mut SMatrix<f64, N, N>) {
+        *x = self.sandwich(x);
+    }
 }
 
 impl<const N: usize> Sandwich<N> for SMatrix<f64, N, N> {
@@ -171,6 +178,15 @@ impl<const N: usize, const M: usize> Sandwich<N> for GainTransition<N, M> {
             None => sandwich_walk(&self.f, &sandwich_gain(x, &self.k, &self.h), self.walk_from),
         }
     }
+    fn sandwich_in_place(&self, x: &mut SMatrix<f64, N, N>) {
+        match &self.dense {
+            Some(a) => *x = a * *x * a.transpose(),
+            None => {
+                sandwich_gain_in_place(x, &self.k, &self.h);
+                sandwich_walk_in_place(&self.f, x, self.walk_from);
+            }
+        }
+    }
 }
 
 /// `M_i,k = ∂P⁻_k/∂q_i`, propagated as `M_i,k = λ A_k M_i,k-1 A_kᵀ + E_ii` with
@@ -203,7 +219,7 @@ impl<const N: usize> Sensitivity<N> {
     /// [`Sensitivity::propagate`] for the entries not in `skip` (theirs stay as they are).
     pub fn propagate_masked(&mut self, a: &impl Sandwich<N>, forgetting: f64, skip: &[bool; N]) {
         for (i, m) in self.m.iter_mut().enumerate().filter(|(i, _)| !skip[*i]) {
-            *m = a.sandwich(m);
+            a.sandwich_in_place(m);
             *m *= forgetting;
             m[(i, i)] += 1.0;
         }
@@ -382,6 +398,10 @@ mod tests {
         assert!((t.matrix() - a).amax() < 1e-12);
         let dense = a * x * a.transpose();
         assert!((t.sandwich(&x) - dense).amax() < 1e-10 * dense.amax());
+        // In place: the same numbers, bit for bit (the recursions' outputs must not move).
+        let mut y = x;
+        t.sandwich_in_place(&mut y);
+        assert_eq!(y, t.sandwich(&x));
     }
 
     #[test]

@@ -121,11 +121,11 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         let propagate_fixed_sum =
             (ahc..N).any(|i| self.fixed[i]) || self.fixed_sum.iter().any(|v| *v != 0.0);
         if propagate_fixed_sum {
-            let mut next = a.sandwich(&self.fixed_sum) * self.adapt.forgetting;
+            a.sandwich_in_place(&mut self.fixed_sum);
+            self.fixed_sum *= self.adapt.forgetting;
             for i in (ahc..N).filter(|&i| self.fixed[i]) {
-                next[(i, i)] += self.ukf.process_noise[i];
+                self.fixed_sum[(i, i)] += self.ukf.process_noise[i];
             }
-            self.fixed_sum = next;
         }
         propagate_fixed_sum
     }
@@ -152,10 +152,10 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         let update = GainTransition::new(&SMatrix::identity(), &self.ukf.gain, &self.ukf.h);
         for (i, m) in self.sensitivity.m.iter_mut().enumerate() {
             if !self.fixed[i] {
-                *m = update.sandwich(m);
+                update.sandwich_in_place(m);
             }
         }
-        self.fixed_sum = update.sandwich(&self.fixed_sum);
+        update.sandwich_in_place(&mut self.fixed_sum);
         self.ukf.reseat(rates, var, periods);
         let k = rates.len().min(var.len()).min(N);
         let clear = |m: &mut SMatrix<f64, N, N>| {
