@@ -917,6 +917,7 @@ impl VehiclePipeline {
                         r.filters.forget(j);
                     }
                 }
+                r.filters.set_fault_in_force(r.diag.fault_in_force());
                 for j in 0..r.l {
                     self.active[j] = r.diag.active(j);
                 }
@@ -1593,6 +1594,9 @@ mod tests {
         }
         fn forget(&mut self, j: usize) {
             self.inner.forget(j)
+        }
+        fn set_fault_in_force(&mut self, in_force: bool) {
+            self.inner.set_fault_in_force(in_force)
         }
     }
 

@@ -397,13 +397,15 @@ fn a_stuck_motor_stays_stuck_while_the_data_fit_stuck() {
     }
 }
 
-/// Hexa motor 3 LOE, seed 4: 13 s after the onset the filters spread the loss onto motor 1.
-/// While the data pin the decided loss on motor 3, motor 1's alarm is listed with it (`also`,
-/// in a `changed` decision), not decided as a fault of its own.
+/// Hexa motor 3 LOE, seed 15: within 2 s of the onset the filters spread the loss onto
+/// motor 1. While the data pin the decided loss on motor 3, motor 1's alarm is listed with it
+/// (`also`, in a `changed` decision), not decided as a fault of its own. (On seed 4 the spread
+/// came 13 s after the onset, until the MIT-UKF identified while the fault was in force: its
+/// held gains no longer wander onto motor 1 there.)
 #[test]
 fn a_decided_motor_loss_the_data_pin_holds_the_alarm_it_spreads() {
     use ahcmon::diagnose::vehicle::Event;
-    let all = decisions("hexa-x-motor3-loe", 4);
+    let all = decisions("hexa-x-motor3-loe", 15);
     let faults: Vec<_> = all
         .iter()
         .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
@@ -415,9 +417,7 @@ fn a_decided_motor_loss_the_data_pin_holds_the_alarm_it_spreads() {
         "{faults:?}"
     );
     assert!(
-        faults
-            .iter()
-            .any(|d| d.t > 25.0 && d.also.iter().any(|a| a == "motor1")),
+        faults.iter().any(|d| d.also.iter().any(|a| a == "motor1")),
         "{faults:?}"
     );
 }
@@ -695,5 +695,35 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
                 "{name} seed {seed}: {all:?}"
             );
         }
+    }
+}
+
+/// Issue 4's "the MIT-UKF's gamma within 0.05 of truth within 5 s", on the gain losses, as the
+/// share of steps after onset + 5 s with gamma more than 0.05 off the simulator's truth, mean
+/// over seeds 1-10. Without identification (the MIT-UKF holding its gains' and biases' noise
+/// at q0 while a fault is in force) the means were 12.3 %, 45.8 % and 26.2 %; with it 0.8 %,
+/// 5.4 % and 14.8 %. The bounds are about twice those (the runs are seeded, but another
+/// machine's floating point may move a seed's split). The line itself is not met: the plane's
+/// gain sits low under the 10 % damping mismatch, and the helicopter's and the offsets' are
+/// worse held (see the README).
+#[test]
+fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_loss() {
+    for (name, bound) in [
+        ("quad-x-motor2-loe", 2.0),
+        ("hexa-x-motor3-loe", 10.0),
+        ("plane-elevator-loe", 25.0),
+    ] {
+        let shares: Vec<f64> = (1..=10)
+            .map(|seed| {
+                let r = run(name, seed);
+                assert_eq!(r.filters[0].filter, "mit-ukf");
+                r.filters[0].metrics.gamma_off_after_5s_pct.unwrap()
+            })
+            .collect();
+        let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+        assert!(
+            mean <= bound,
+            "{name}: {mean:.1} % of steps off ({shares:?})"
+        );
     }
 }

@@ -961,6 +961,11 @@ impl Diagnoser {
         self.actuators[j].active
     }
 
+    /// Whether any actuator has a fault decided and not cleared.
+    pub fn fault_in_force(&self) -> bool {
+        self.actuators.iter().any(|st| st.active.is_some())
+    }
+
     /// Feed one step: commands and both filters' estimates (`est[filter][j]`). Decisions are
     /// appended to `out`.
     pub fn update(
@@ -1039,7 +1044,7 @@ impl Diagnoser {
         // level is followed by the plain search, as before the whitened one (hexa motor 5
         // stuck: with the whitened search going on, once the onset had left the store it
         // fitted motor 6 stuck instead, and motor 6 was decided on 7 of 10 seeds).
-        let fault_in_force = self.actuators.iter().any(|st| st.active.is_some());
+        let fault_in_force = self.fault_in_force();
         let whitened_reading = if warm && under_way && !self.motors.is_empty() && !fault_in_force {
             self.change.whitened_search()
         } else {

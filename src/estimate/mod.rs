@@ -19,7 +19,7 @@ pub use mit::{
     AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
 };
 pub use mit_esmf::{MitEsmf, ShapeSensitivity};
-pub use mit_ukf::MitUkf;
+pub use mit_ukf::{IdentifyParams, MitUkf};
 pub use ukf::{Ukf, UkfParams};
 
 use nalgebra::SVector;

@@ -174,6 +174,7 @@ pub fn run_vehicle_scenario(
                 filters.forget(j);
             }
         }
+        filters.set_fault_in_force(diag.fault_in_force());
         decisions.append(&mut new_decisions);
         sink.step(&s, &views, &profile);
         // Scores on the watched actuator (the faulty one; actuator 0 in a healthy flight).
