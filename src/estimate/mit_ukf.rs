@@ -242,6 +242,13 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         }
     }
 
+    /// A fault was decided (again): the change must be followed first, so the hold ends and its
+    /// delay restarts.
+    pub fn restart_identification(&mut self) {
+        self.identifying = false;
+        self.in_force_steps = 0;
+    }
+
     /// Whether the AHC noise is being held (identification).
     pub fn identifying(&self) -> bool {
         self.identifying

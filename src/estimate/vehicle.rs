@@ -446,6 +446,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         p[(gi, gi)] += self.setup.kalman_p0[(gi, gi)];
         p[(di, di)] += self.setup.kalman_p0[(di, di)];
         self.ukf.restart_adaptation();
+        self.ukf.restart_identification();
         super::esmf::add_jump_set_on(&mut self.esmf.esmf.p, &self.setup.set_p0, &[gi, di]);
         self.esmf.esmf.intersect_box();
         self.esmf.schedule.restart();
@@ -490,8 +491,8 @@ mod tests {
     /// Identification (see `IdentifyParams`) on a quad whose motor 2 loses half its effect at
     /// 10 s and recovers at 25 s, the fault "decided" at 10.5 s: the MIT rule raises the AHC
     /// noise after the onset; from 3 s after the decision every AHC entry is at most q0 while
-    /// the fault holds; the recovery releases the hold within a second; none once the fault is
-    /// no longer in force.
+    /// the fault holds, and again 3 s after a second decision at 20 s; the recovery releases
+    /// the hold within a second; none once the fault is no longer in force.
     #[test]
     fn identification_holds_the_ahc_noise_until_a_further_change() {
         use crate::sim::fault::Fault;
@@ -514,7 +515,8 @@ mod tests {
             let y = SVector::<f64, 4>::from_column_slice(&s.y);
             pair.ukf.try_step(&s.u[..4], &y).unwrap();
             let in_force = (10.5..=28.0).contains(&s.t);
-            if (s.t - 10.5).abs() < dt / 2.0 {
+            // Decided at 10.5 s, and again at 20 s (a second decision restarts the delay).
+            if (s.t - 10.5).abs() < dt / 2.0 || (s.t - 20.0).abs() < dt / 2.0 {
                 pair.forget(1);
             }
             if (10.0..10.5).contains(&s.t) {
@@ -524,10 +526,10 @@ mod tests {
             }
             pair.set_fault_in_force(in_force);
             let held = ahc.clone().all(|i| pair.ukf.ukf.process_noise[i] <= q0[i]);
-            if (13.6..25.0).contains(&s.t) {
+            if (13.6..19.9).contains(&s.t) || (23.1..25.0).contains(&s.t) {
                 assert!(pair.ukf.identifying() && held, "t = {}", s.t);
             }
-            if s.t < 13.4 || s.t > 28.0 {
+            if s.t < 13.4 || (20.0..22.9).contains(&s.t) || s.t > 28.0 {
                 assert!(!pair.ukf.identifying(), "t = {}", s.t);
             }
             if s.t >= 25.0 && released_at.is_none() && pair.ukf.releases > 0 {
