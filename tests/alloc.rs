@@ -196,6 +196,15 @@ fn vehicle_filter_steps_allocate_nothing() {
                 quad.step(&s.u[..4], &s.y[..4])
             };
             assert!(r.iter().all(|r| r.is_ok()));
+            // A fault "decided" at step 300 and in force to step 700: the MIT-UKF identifies
+            // (holds its AHC noise, tests the innovation mean) from step 450.
+            if k == 300 {
+                quad.forget(1);
+            }
+            quad.set_fault_in_force((300..700).contains(&k));
+            if k == 500 {
+                assert!(quad.ukf.identifying());
+            }
         }
     });
     assert_eq!(
