@@ -20,7 +20,8 @@ fn run(name: &str, seed: u64) -> ahcmon::eval::Run {
 /// simulator, not from the filter; the thresholds come from healthy flights (`ahcmon
 /// thresholds`), not from these. Hexa motor 3 also on seed 4, where the filters spread the
 /// loss onto motor 1 13 s after the onset (decided as a fault of its own until the data's
-/// pin on a decided motor's gain held the other motors' alarms). The plane elevator to seed 6,
+/// pin on a decided motor's gain held the other motors' alarms; no longer spread since the
+/// MIT-UKF identifies while a fault is in force). The plane elevator to seed 6,
 /// decided after 2.3 s and 3.2 s while a gain and an offset fitting better together kept the
 /// data's clear reading of the elevator from counting.
 #[test]
@@ -397,15 +398,15 @@ fn a_stuck_motor_stays_stuck_while_the_data_fit_stuck() {
     }
 }
 
-/// Hexa motor 3 LOE, seed 15: within 2 s of the onset the filters spread the loss onto
-/// motor 1. While the data pin the decided loss on motor 3, motor 1's alarm is listed with it
-/// (`also`, in a `changed` decision), not decided as a fault of its own. (On seed 4 the spread
-/// came 13 s after the onset, until the MIT-UKF identified while the fault was in force: its
-/// held gains no longer wander onto motor 1 there.)
+/// Hexa motor 3 LOE, seed 12: 2 s after the decision the filters spread the loss onto motor 6.
+/// While the data pin the decided loss on motor 3, motor 6's alarm, which starts after the
+/// decision, is listed with it (`also`, in a `changed` decision), not decided as a fault of its
+/// own. (Seed 4's spread onto motor 1, 13 s after the onset, was this case until the MIT-UKF
+/// identified while a fault is in force: its capped gains no longer wander that far.)
 #[test]
 fn a_decided_motor_loss_the_data_pin_holds_the_alarm_it_spreads() {
     use ahcmon::diagnose::vehicle::Event;
-    let all = decisions("hexa-x-motor3-loe", 15);
+    let all = decisions("hexa-x-motor3-loe", 12);
     let faults: Vec<_> = all
         .iter()
         .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
@@ -416,8 +417,11 @@ fn a_decided_motor_loss_the_data_pin_holds_the_alarm_it_spreads() {
             .all(|d| d.actuator.as_deref() == Some("motor3")),
         "{faults:?}"
     );
+    let decided = faults[0].t;
     assert!(
-        faults.iter().any(|d| d.also.iter().any(|a| a == "motor1")),
+        faults
+            .iter()
+            .any(|d| d.t > decided + 1.0 && d.also.iter().any(|a| a == "motor6")),
         "{faults:?}"
     );
 }
@@ -700,9 +704,9 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 
 /// Issue 4's "the MIT-UKF's gamma within 0.05 of truth within 5 s", on the gain losses, as the
 /// share of steps after onset + 5 s with gamma more than 0.05 off the simulator's truth, mean
-/// over seeds 1-10. Without identification (the MIT-UKF holding its gains' and biases' noise
-/// at q0 while a fault is in force) the means were 12.3 %, 45.8 % and 26.2 %; with it 0.8 %,
-/// 5.4 % and 14.8 %. The bounds are about twice those (the runs are seeded, but another
+/// over seeds 1-10. Without identification (the MIT-UKF capping its gains' and biases' noise
+/// at q0 from 3 s after a decision while a fault is in force) the means were 12.3 %, 45.8 %
+/// and 26.2 %; with it 0.8 %, 5.4 % and 14.8 %. The bounds are about 1.4-2.5 times those (the runs are seeded, but another
 /// machine's floating point may move a seed's split). The line itself is not met: the plane's
 /// gain sits low under the 10 % damping mismatch, and the helicopter's and the offsets' are
 /// worse held (see the README).
@@ -711,7 +715,7 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_loss() {
     for (name, bound) in [
         ("quad-x-motor2-loe", 2.0),
         ("hexa-x-motor3-loe", 10.0),
-        ("plane-elevator-loe", 25.0),
+        ("plane-elevator-loe", 20.0),
     ] {
         let shares: Vec<f64> = (1..=10)
             .map(|seed| {

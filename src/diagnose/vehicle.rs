@@ -1168,10 +1168,10 @@ impl Diagnoser {
         // design (motors fail low), spreads over the other motors' gains: while the data pin
         // it on its motor, the alarms of other motors without a fault in force count as that
         // motor's (and are listed with it, `also`), not as faults of their own. A decided
-        // motor's gain loss takes over the alarms that start while the data pin it (gusts made
-        // the filters spread hexa motor 3's loss onto motor 1 13 s after the onset), and keeps
-        // each while it lasts; a motor alarming while no pin holds is decided on its own
-        // (after `held_for_the_data`, at most `HOLD_MAX_S`).
+        // motor's gain loss takes over the alarms that start while the data pin it (gusts make
+        // the filters spread hexa motor 3's loss onto motor 6 2 s after the decision, seed 12),
+        // and keeps each while it lasts; a motor alarming while no pin holds is decided on its
+        // own (after `held_for_the_data`, at most `HOLD_MAX_S`).
         let mut alarms = [0u8; crate::model::MAX_ACTUATORS];
         for (bits, st) in alarms.iter_mut().zip(&self.actuators) {
             *bits = (0..2)

@@ -310,6 +310,14 @@ mod tests {
         let g = SMatrix::<f64, 11, 11>::identity() - k * h;
         let dense = g * x * g.transpose();
         assert!((sandwich_gain(&x, &k, &sh) - dense).amax() < 1e-10 * dense.amax());
+        // In place: bit for bit the formula as it was written before, with its copies.
+        let y = x - k * sh.right_t(&x).transpose();
+        let mut before = y;
+        before.gemm(-1.0, &sh.right_t(&y), &k.transpose(), 1.0);
+        symmetrize(&mut before);
+        let mut in_place = x;
+        sandwich_gain_in_place(&mut in_place, &k, &sh);
+        assert_eq!(in_place, before);
     }
 
     #[test]

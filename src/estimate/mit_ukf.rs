@@ -43,7 +43,8 @@ pub struct MitUkf<Mo, const N: usize, const M: usize, const S: usize> {
     /// Identification while a fault is in force (see [`MitUkf::set_fault_in_force`]); `None`
     /// (the default) adapts as in detection throughout.
     pub identify: Option<IdentifyParams>,
-    /// Steps since a fault came in force (0: none in force), restarted by a release.
+    /// Measured steps with a fault in force since the hold's delay last started (at the fault
+    /// coming in force, a release or a new decision).
     in_force_steps: u64,
     /// The AHC entries of Q are being held at most at q0.
     identifying: bool,
@@ -59,19 +60,21 @@ pub struct MitUkf<Mo, const N: usize, const M: usize, const S: usize> {
 /// jump it adds to that actuator's covariance (`forget`), and what is left is estimating a
 /// constant again: a noise still raised then makes every gain and bias follow the gusts (on the
 /// simulated hexa's motor 3 loss, gamma beyond 0.05 of the truth on 46 % of the steps after
-/// onset + 5 s, against 5 % held). So the AHC entries are held at most at q0 (the MIT rule may
-/// still lower them) from `after_steps` after the decision, until the fault clears or the
-/// innovations show a further change.
+/// onset + 5 s, against 5 % held). So the AHC entries are capped at q0 (the MIT rule may still
+/// lower them) from `after_steps` after the decision, until no fault is in force, a further
+/// fault is decided, or the innovations show a further change.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IdentifyParams {
-    /// Steps from the fault decision to the hold: the onset's transient (the autopilot's answer
-    /// to the change, the estimate's re-convergence after the jump) is over first, so that the
-    /// hold does not weigh it for the rest of the fault.
+    /// Measured steps (lost samples do not count) from the fault decision to the hold: the
+    /// onset's transient (the autopilot's answer to the change, the estimate's re-convergence
+    /// after the jump) is over first, so that the hold does not weigh it for the rest of the
+    /// fault.
     pub after_steps: u64,
-    /// The hold ends (and its delay restarts) when `n μᵀ S⁻¹ μ` of the window's innovation mean
-    /// μ (n samples) exceeds this: `n` times the chi-square 99.9 % quantile is what noise of any
-    /// colour can reach (fully correlated over the window, μ is one draw of N(0, S)).
-    pub release_mean_nis: f64,
+    /// The hold ends (and its delay restarts) when `μᵀ S⁻¹ μ` of the window's innovation mean μ
+    /// exceeds this, the chi-square 99.9 % quantile: with the filter's S right, noise of any
+    /// colour does that on at most 0.1 % of windows (fully correlated over the window, μ is one
+    /// draw of N(0, S); white, its spread is n times smaller).
+    pub release_chi2: f64,
 }
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo, N, M, S> {
@@ -236,7 +239,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         if !self.identifying && self.in_force_steps > p.after_steps {
             self.identifying = true;
             let ahc = self.ukf.model.ahc_start();
-            for i in ahc..N {
+            for i in (ahc..N).filter(|&i| !self.fixed[i]) {
                 self.ukf.process_noise[i] = self.ukf.process_noise[i].min(self.q0[i]);
             }
         }
@@ -262,8 +265,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         let Some(chol) = self.ukf.s.cholesky() else {
             return;
         };
-        let mean_nis = self.window.len() as f64 * chol.solve(mu).dot(mu);
-        if mean_nis > p.release_mean_nis {
+        if chol.solve(mu).dot(mu) > p.release_chi2 {
             self.identifying = false;
             self.in_force_steps = 0;
             self.releases += 1;

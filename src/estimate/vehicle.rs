@@ -303,7 +303,7 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
         f.fixed = s.fixed;
         f.identify = Some(IdentifyParams {
             after_steps: (IDENTIFY_AFTER_S / Model::dt(&s.model)).round() as u64,
-            release_mean_nis: adapt.window as f64 * clip,
+            release_chi2: clip,
         });
         f
     }
@@ -489,10 +489,12 @@ mod tests {
     use crate::model::Model;
 
     /// Identification (see `IdentifyParams`) on a quad whose motor 2 loses half its effect at
-    /// 10 s and recovers at 25 s, the fault "decided" at 10.5 s: the MIT rule raises the AHC
-    /// noise after the onset; from 3 s after the decision every AHC entry is at most q0 while
-    /// the fault holds, and again 3 s after a second decision at 20 s; the recovery releases
-    /// the hold within a second; none once the fault is no longer in force.
+    /// 10 s and recovers at 40 s. The fault is "decided" at 10.5 s and again at 20 s, is out of
+    /// force from 23.5 s to 24 s, and is decided once more at 24 s: the MIT rule raises the AHC
+    /// noise after the onset; 3 s after each decision every AHC entry is capped at q0 and the
+    /// rate entries are left as they were; the cap ends at once when no fault is in force; the
+    /// recovery releases it within a second (and it returns 3 s later, the fault still in
+    /// force).
     #[test]
     fn identification_holds_the_ahc_noise_until_a_further_change() {
         use crate::sim::fault::Fault;
@@ -501,22 +503,21 @@ mod tests {
         let profile = Profile::resolve("quad-x").unwrap();
         let mut cfg = VehicleSimConfig::calm(profile.clone(), dt, 7);
         cfg.faults.push(
-            toml::from_str::<Fault>("actuator='motor2'\nt=10.0\nuntil=25.0\ngamma=0.5").unwrap(),
+            toml::from_str::<Fault>("actuator='motor2'\nt=10.0\nuntil=40.0\ngamma=0.5").unwrap(),
         );
         let mut sim = VehicleSim::new(cfg).unwrap();
         let mut pair =
             FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, dt).unwrap());
         let q0 = pair.ukf.q0;
         let ahc = 3..11;
-        let mut raised = false;
+        let at = |t: f64, when: f64| (t - when).abs() < dt / 2.0;
+        let (mut raised, mut transitions) = (false, 0);
         let mut released_at = None;
-        for _ in 0..(35.0 / dt) as usize {
+        for _ in 0..(45.0 / dt) as usize {
             let s = sim.step();
             let y = SVector::<f64, 4>::from_column_slice(&s.y);
             pair.ukf.try_step(&s.u[..4], &y).unwrap();
-            let in_force = (10.5..=28.0).contains(&s.t);
-            // Decided at 10.5 s, and again at 20 s (a second decision restarts the delay).
-            if (s.t - 10.5).abs() < dt / 2.0 || (s.t - 20.0).abs() < dt / 2.0 {
+            if at(s.t, 10.5) || at(s.t, 20.0) || at(s.t, 24.0) {
                 pair.forget(1);
             }
             if (10.0..10.5).contains(&s.t) {
@@ -524,15 +525,24 @@ mod tests {
                     .clone()
                     .any(|i| pair.ukf.ukf.process_noise[i] > 2.0 * q0[i]);
             }
+            let in_force = (10.5..23.5).contains(&s.t) || s.t >= 24.0;
+            let (before, was) = (pair.ukf.ukf.process_noise, pair.ukf.identifying());
             pair.set_fault_in_force(in_force);
+            if pair.ukf.identifying() && !was {
+                transitions += 1;
+                let rates_kept = (0..3).all(|i| pair.ukf.ukf.process_noise[i] == before[i]);
+                assert!(rates_kept, "t = {}: the cap touched the rate entries", s.t);
+            }
             let held = ahc.clone().all(|i| pair.ukf.ukf.process_noise[i] <= q0[i]);
-            if (13.6..19.9).contains(&s.t) || (23.1..25.0).contains(&s.t) {
+            let holding = [13.6..19.9, 23.1..23.5, 27.1..40.0];
+            if holding.iter().any(|r| r.contains(&s.t)) {
                 assert!(pair.ukf.identifying() && held, "t = {}", s.t);
             }
-            if s.t < 13.4 || (20.0..22.9).contains(&s.t) || s.t > 28.0 {
+            let free = [0.0..13.4, 20.0..22.9, 23.5..24.0];
+            if free.iter().any(|r| r.contains(&s.t)) {
                 assert!(!pair.ukf.identifying(), "t = {}", s.t);
             }
-            if s.t >= 25.0 && released_at.is_none() && pair.ukf.releases > 0 {
+            if s.t >= 40.0 && released_at.is_none() && pair.ukf.releases > 0 {
                 released_at = Some(s.t);
             }
         }
@@ -540,8 +550,10 @@ mod tests {
             raised,
             "the MIT rule did not raise any AHC noise after the onset"
         );
+        // One hold after each decision, and one 3 s after the release (the fault still in force).
+        assert_eq!(transitions, 4);
         let at = released_at.expect("the recovery did not release the hold");
-        assert!(at < 26.0, "released at {at} s");
+        assert!(at < 41.0, "released at {at} s");
         assert_eq!(pair.ukf.releases, 1, "released before the recovery too");
     }
 
