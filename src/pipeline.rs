@@ -919,6 +919,11 @@ impl VehiclePipeline {
                 }
                 r.filters.set_fault_in_force(r.diag.fault_in_force());
                 for j in 0..r.l {
+                    if r.filters.awaits_identification(j) {
+                        r.filters.hold_class(j, r.diag.identified(j));
+                    }
+                }
+                for j in 0..r.l {
                     self.active[j] = r.diag.active(j);
                 }
                 self.last = Some((s.t, r.est));
@@ -1550,6 +1555,7 @@ mod tests {
     /// Records the inputs the pipeline gives the filters (`true` for a coast) and passes the
     /// commands on.
     use crate::estimate::EstimatorError;
+    use crate::estimate::vehicle::Identified;
 
     /// Each input the filters were given, and whether it was a coast's.
     type InputLog = std::sync::Arc<std::sync::Mutex<Vec<(bool, Vec<f64>)>>>;
@@ -1597,6 +1603,12 @@ mod tests {
         }
         fn set_fault_in_force(&mut self, in_force: bool) {
             self.inner.set_fault_in_force(in_force)
+        }
+        fn hold_class(&mut self, j: usize, identified: Option<Identified>) {
+            self.inner.hold_class(j, identified)
+        }
+        fn awaits_identification(&self, j: usize) -> bool {
+            self.inner.awaits_identification(j)
         }
     }
 

@@ -1,6 +1,7 @@
 //! The estimator step is the hot path: a counting global allocator shows that 1000 steps of each
 //! filter allocate nothing on the heap.
 
+use ahcmon::estimate::vehicle::Identified;
 use ahcmon::estimate::{
     AdaptationParams, Esmf, EsmfParams, KfUkf, MitEsmf, MitUkf, SlaveKfParams, Ukf, UkfParams,
 };
@@ -183,6 +184,7 @@ fn vehicle_filter_steps_allocate_nothing() {
     .unwrap();
     let samples: Vec<_> = (0..1000).map(|_| sim.step()).collect();
     let mut quad = FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, 0.02).unwrap());
+    let mut reseated = 0;
     let n = count(|| {
         for (k, s) in samples.iter().enumerate() {
             // One sample in five lost: a coast (prediction only) instead of a step; now and
@@ -205,12 +207,27 @@ fn vehicle_filter_steps_allocate_nothing() {
             if k == 500 {
                 assert!(quad.ukf.identifying());
             }
+            // Reseated from the diagnosis once identifying (at the healthy point: the
+            // simulated quad has no fault, and a reseat away from it would end the hold).
+            if quad.awaits_identification(1) {
+                reseated += 1;
+                quad.hold_class(
+                    1,
+                    Some(Identified {
+                        gamma: 1.0,
+                        gamma_std: 0.01,
+                        delta: 0.0,
+                        delta_std: 0.013,
+                    }),
+                );
+            }
         }
     });
     assert_eq!(
         n, 0,
         "quad: {n} allocations in 1000 steps, coasts and reseats"
     );
+    assert_eq!(reseated, 1, "the identification was not reseated once");
     // Eight actuators: the quad's motors twice over (an X8-like coaxial layout).
     let mut octo = profile.clone();
     let mut extra = octo.actuators.clone();

@@ -615,3 +615,29 @@ fn mit_ukf_sensitivity_across_a_reseat_matches_finite_differences() {
         f.ukf.s
     });
 }
+
+/// Identification reseats the MIT-UKF's gamma and delta from the diagnosis
+/// (`reseat_entries`): their covariances with everything else are cleared, so their
+/// sensitivities are too, and the rest's are carried through the last update. 6 steps on,
+/// `dP⁻/dq_i` still matches central differences of S.
+#[test]
+fn mit_ukf_sensitivity_across_a_coefficient_reseat_matches_finite_differences() {
+    let m = model(true);
+    let data = samples(140, NoiseKind::Gaussian, 1e-4, 2.89e-6);
+    let base = frozen_mit_ukf(&m, &data);
+    check_sensitivity_against_differences("coefficients reseated", &m, &base, |f| {
+        for s in &data[100..105] {
+            f.try_step(&s.u, &s.y).unwrap();
+        }
+        f.reseat_entries(&[(3, 0.55, 4e-4), (4, 0.01, 1e-4)]);
+        assert_eq!((f.ukf.x[3], f.ukf.x[4]), (0.55, 0.01));
+        assert_eq!(
+            (f.ukf.p[(3, 4)], f.ukf.p[(0, 3)], f.ukf.p[(4, 4)]),
+            (0.0, 0.0, 1e-4)
+        );
+        for s in &data[105..111] {
+            f.try_step(&s.u, &s.y).unwrap();
+        }
+        f.ukf.s
+    });
+}

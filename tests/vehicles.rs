@@ -702,20 +702,27 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
     }
 }
 
-/// Issue 4's "the MIT-UKF's gamma within 0.05 of truth within 5 s", on the gain losses, as the
-/// share of steps after onset + 5 s with gamma more than 0.05 off the simulator's truth, mean
-/// over seeds 1-10. Without identification (the MIT-UKF capping its gains' and biases' noise
-/// at q0 from 3 s after a decision while a fault is in force) the means were 12.3 %, 45.8 %
-/// and 26.2 %; with it 0.8 %, 5.4 % and 14.8 %. The bounds are about 1.4-2.5 times those (the runs are seeded, but another
+/// Issue 4's "the MIT-UKF's gamma within 0.05 of truth within 5 s", as the share of steps
+/// after onset + 5 s with gamma more than 0.05 off the simulator's truth, mean over seeds 1-10.
+/// Measured (mean %), with the gains' and biases' noise capped at q0 from 3 s after a decision
+/// and without / with the reseat from the diagnosis' fit then (`hold_class`): quad motor 2
+/// loss 0.8 / 0.7, hexa motor 3 loss 5.4 / 1.5, plane elevator loss 14.8 / 14.6, quad motor 4
+/// offset 100 / 2.0, hexa motor 5 stuck 100 / 16.2, helicopter swash 2 loss 82.1 / 9.8, tail
+/// offset 23.0 / 7.9. The bounds are about twice those (the runs are seeded, but another
 /// machine's floating point may move a seed's split). The line itself is not met: the plane's
-/// gain sits low under the 10 % damping mismatch, and the helicopter's and the offsets' are
-/// worse held (see the README).
+/// gains sit low under the 10 % damping mismatch (its aileron's at about 0.9 healthy too, so
+/// on the aileron offset 82 % of the steps are off), and gusts still move the others' beyond
+/// 0.05 now and then (see the README).
 #[test]
-fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_loss() {
+fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
     for (name, bound) in [
         ("quad-x-motor2-loe", 2.0),
-        ("hexa-x-motor3-loe", 10.0),
+        ("hexa-x-motor3-loe", 5.0),
         ("plane-elevator-loe", 20.0),
+        ("quad-x-motor4-bias", 5.0),
+        ("hexa-x-motor5-stuck", 30.0),
+        ("heli-swash2-loe", 20.0),
+        ("heli-tail-bias", 16.0),
     ] {
         let shares: Vec<f64> = (1..=10)
             .map(|seed| {

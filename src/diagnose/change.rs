@@ -42,6 +42,8 @@ pub struct Reading {
     pub kind: ChangeKind,
     /// γ (gain), δ (offset) or the stuck output (stuck), normalised command units.
     pub value: f64,
+    /// Its standard deviation from the fit (NaN where the regressor is zero).
+    pub value_std: f64,
     /// Time of the first sample of the changed stretch.
     pub since: f64,
     /// Samples in the changed stretch.
@@ -78,8 +80,8 @@ pub struct Reading {
 const KINDS: [ChangeKind; 3] = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
 
 /// One hypothesis' best fit over the change times: (drop, samples, θ, residual variance or
-/// sum of squares, mean command).
-type Fit = (f64, usize, f64, f64, f64);
+/// sum of squares, mean command, sum of squares of its regressor).
+type Fit = (f64, usize, f64, f64, f64, f64);
 
 /// The drops and values of a gain, an offset and a stuck output (in [`KINDS`] order), and of
 /// a gain and an offset together, from `Σ g y`, `Σ g²`, `Σ o y`, `Σ o²`, `Σ g o` over a
@@ -114,24 +116,25 @@ fn kind_drops(
 }
 
 /// Keep in `row`, per kind, the best of this stretch's fits from `sums` (see [`kind_drops`]),
-/// recorded as `fit(drop, θ)`, and in `pair_best` the best drop of the pair.
+/// recorded as `fit(drop, θ, Σ regressor²)`, and in `pair_best` the best drop of the pair.
 fn keep_best(
     row: &mut [Fit; 3],
     pair_best: &mut f64,
     sums: [f64; 5],
-    fit: impl Fn(f64, f64) -> Fit,
+    fit: impl Fn(f64, f64, f64) -> Fit,
 ) {
     let [gy, gx, oy, ox, go] = sums;
     let (fits, pair) = kind_drops(gy, gx, oy, ox, go);
     if let Some(drop) = pair.filter(|d| d.is_finite() && *d > *pair_best) {
         *pair_best = drop;
     }
-    for (slot, (drop, theta)) in row.iter_mut().zip(fits) {
+    // A stuck output's regressor is the offset's (see `kind_drops`).
+    for ((slot, (drop, theta)), ss) in row.iter_mut().zip(fits).zip([gx, ox, ox]) {
         if let (Some(drop), Some(theta)) = (drop, theta)
             && drop.is_finite()
             && drop > slot.0
         {
-            *slot = fit(drop, theta);
+            *slot = fit(drop, theta, ss);
         }
     }
 }
@@ -324,7 +327,7 @@ impl ChangeTest {
         let cap = self.buf.len();
         let l = self.effects.len();
         // Per actuator and kind: (drop, samples, θ, residual variance).
-        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         let mut mixed = [0.0f64; MAX_ACTUATORS];
         // Per actuator: the best ramp (drop, samples, rate).
         let mut ramp = [(0.0f64, 0usize, 0.0f64); MAX_ACTUATORS];
@@ -374,9 +377,9 @@ impl ChangeTest {
                 }
                 let rows = (n * self.rows) as f64;
                 let sums = [gy, gx, oy, ox, bbu];
-                keep_best(&mut best[j], &mut mixed[j], sums, |drop, theta| {
+                keep_best(&mut best[j], &mut mixed[j], sums, |drop, theta, ss| {
                     let var = ((base - drop) / rows).max(0.0);
-                    (drop, n, theta, var, su / n as f64)
+                    (drop, n, theta, var, su / n as f64, ss)
                 });
             }
             // Over the whole store, a drift that began before it: an offset already there and
@@ -428,8 +431,12 @@ impl ChangeTest {
         } else {
             0.0
         };
+        // θ's spread, counting the independent samples as `margin_over` does.
+        let rho = autocorrelation.clamp(0.0, 0.999);
+        let value_std = (h.3 / h.5 * (1.0 + rho) / (1.0 - rho)).sqrt();
         Some(Reading {
             autocorrelation,
+            value_std,
             command_mean: h.4,
             actuator: j,
             kind: kinds[k],
@@ -512,10 +519,10 @@ impl ChangeTest {
         } else {
             gain_drop.max(offset_drop)
         };
-        let (kind, value, drop, other) = if offset_drop > gain_drop {
-            (ChangeKind::Offset, oy / ox, offset_drop, gain_drop)
+        let (kind, value, drop, other, ss) = if offset_drop > gain_drop {
+            (ChangeKind::Offset, oy / ox, offset_drop, gain_drop, ox)
         } else {
-            (ChangeKind::Gain, 1.0 + gy / gx, gain_drop, offset_drop)
+            (ChangeKind::Gain, 1.0 + gy / gx, gain_drop, offset_drop, gx)
         };
         let noise_var = ((base - drop) / (n * rows) as f64).max(0.0);
         if !(noise_var > 0.0 && drop.is_finite() && mixed_drop.is_finite()) {
@@ -524,6 +531,7 @@ impl ChangeTest {
         Some(KindFit {
             kind,
             value,
+            value_std: (noise_var / ss).sqrt(),
             margin: (drop - other) / noise_var,
             mixed_margin: (mixed_drop - drop) / noise_var,
             command_mean: su / n as f64,
@@ -603,7 +611,7 @@ impl ChangeTest {
         let mut acc = [[Acc::default(); 4]; MAX_ACTUATORS];
         let (mut e_y, mut c_sum, mut base) = ([0.0f64; 4], [0.0f64; 4], 0.0);
         // Per actuator and kind: (drop, samples, θ, Σ y² over the stretch, mean command).
-        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
+        let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         let mut mixed = [0.0f64; MAX_ACTUATORS];
         let mut su = [0.0f64; MAX_ACTUATORS];
         for tau in (0..n).rev() {
@@ -655,8 +663,8 @@ impl ChangeTest {
                 }
                 let mean_u = su[j] / m as f64;
                 let sums = [gy, gx, oy, ox, go];
-                keep_best(&mut best[j], &mut mixed[j], sums, |drop, theta| {
-                    (drop, m, theta, base, mean_u)
+                keep_best(&mut best[j], &mut mixed[j], sums, |drop, theta, ss| {
+                    (drop, m, theta, base, mean_u, ss)
                 });
             }
         }
@@ -672,6 +680,7 @@ impl ChangeTest {
             actuator: j,
             kind: kinds[k],
             value: h.2,
+            value_std: (noise_var / h.5).sqrt(),
             since,
             samples: h.1,
             drop: h.0,
@@ -695,6 +704,8 @@ pub struct KindFit {
     /// Gain or offset, whichever fits the whitened residual better, and its value.
     pub kind: ChangeKind,
     pub value: f64,
+    /// Its standard deviation from the whitened fit.
+    pub value_std: f64,
     /// Twice the log likelihood ratio over the other kind, and of the pair (both together)
     /// over this one, in the whitened residual's noise.
     pub margin: f64,
@@ -1030,6 +1041,7 @@ mod tests {
             actuator: 0,
             kind: ChangeKind::Gain,
             value: 0.5,
+            value_std: 0.1,
             since: 0.0,
             samples: 100,
             drop: 120.0,
@@ -1255,6 +1267,47 @@ mod tests {
             }
             assert!(clear >= 9, "{kind:?}: clear on {clear} of 10");
         }
+    }
+
+    /// Root mean square of `(value - truth) / std` over readings.
+    fn rms_z(z: &[f64]) -> f64 {
+        (z.iter().map(|z| z * z).sum::<f64>() / z.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn the_whitened_fits_spread_is_what_it_says() {
+        // 30 seeds of each: with the spread right, the RMS of the standardised errors is 1
+        // (0.75-1.25 holds 95 % of 30-sample draws); the colour is learned, not given, so a
+        // little more is allowed, and well below or above is wrong.
+        for (kind, theta) in [(ChangeKind::Offset, -0.15), (ChangeKind::Gain, 0.7)] {
+            let z: Vec<f64> = (1..=30)
+                .map(|seed| {
+                    let fit = hover_change(kind, theta, seed)
+                        .whitened_gain_or_offset(0, 400)
+                        .expect("colour learned");
+                    (fit.value - theta) / fit.value_std
+                })
+                .collect();
+            let rms = rms_z(&z);
+            println!("{kind:?}: RMS z {rms:.2}");
+            assert!((0.7..=1.5).contains(&rms), "{kind:?}: RMS z {rms:.2}");
+        }
+    }
+
+    #[test]
+    fn the_plain_fits_spread_is_what_it_says_on_white_noise() {
+        // Offset +0.1 on actuator 1 from 4 s, white noise (see `offset_change`): the change
+        // time is fitted too, so a little more than 1 is allowed.
+        let z: Vec<f64> = (1..=30)
+            .map(|seed| {
+                let r = offset_change(400, seed, |t| if t >= 4.0 { 0.1 } else { 0.0 });
+                assert_eq!((r.actuator, r.kind), (1, ChangeKind::Offset), "{r:?}");
+                (r.value - 0.1) / r.value_std
+            })
+            .collect();
+        let rms = rms_z(&z);
+        println!("RMS z {rms:.2}");
+        assert!((0.7..=1.5).contains(&rms), "RMS z {rms:.2}");
     }
 
     /// A motor stuck a little above its hovering command (0.545 against 0.5) from step 1400 of

@@ -224,6 +224,29 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         }
     }
 
+    /// [`Ukf::reseat_entries`], with the sensitivities of what it sets cleared (they no longer
+    /// depend on q), after carrying them through the last step's update as [`Self::reseat`]
+    /// does.
+    pub fn reseat_entries(&mut self, entries: &[(usize, f64, f64)]) {
+        let update = GainTransition::new(&SMatrix::identity(), &self.ukf.gain, &self.ukf.h);
+        let clear = |m: &mut SMatrix<f64, N, N>| {
+            update.sandwich_in_place(m);
+            for &(i, _, _) in entries.iter().filter(|e| e.0 < N) {
+                for j in 0..N {
+                    m[(i, j)] = 0.0;
+                    m[(j, i)] = 0.0;
+                }
+            }
+        };
+        for (n, m) in self.sensitivity.m.iter_mut().enumerate() {
+            if !self.fixed[n] {
+                clear(m);
+            }
+        }
+        clear(&mut self.fixed_sum);
+        self.ukf.reseat_entries(entries);
+    }
+
     /// Tell the filter, after each step's decisions, whether a fault is in force (see
     /// [`IdentifyParams`]). Does nothing unless `identify` is set.
     pub fn set_fault_in_force(&mut self, in_force: bool) {

@@ -292,6 +292,25 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         self.gain = SMatrix::zeros();
     }
 
+    /// Set coordinates from knowledge outside the measurements: each `(i, value, var)` gets
+    /// that value and variance, its covariance with every other coordinate cleared (the rest
+    /// of `P` is a principal block of a positive matrix, so `P` stays positive). The last
+    /// step's gain is cleared, as after [`Self::reseat`].
+    pub fn reseat_entries(&mut self, entries: &[(usize, f64, f64)]) {
+        for &(i, value, var) in entries {
+            if i >= N || !(value.is_finite() && var.is_finite() && var > 0.0) {
+                continue;
+            }
+            self.x[i] = value;
+            for j in 0..N {
+                self.p[(i, j)] = 0.0;
+                self.p[(j, i)] = 0.0;
+            }
+            self.p[(i, i)] = var;
+        }
+        self.gain = SMatrix::zeros();
+    }
+
     /// ±3σ bounds of coordinate `i`.
     pub fn three_sigma(&self, i: usize) -> (f64, f64) {
         let s = 3.0 * self.p[(i, i)].max(0.0).sqrt();

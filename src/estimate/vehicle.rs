@@ -7,7 +7,7 @@ use super::{
     AdaptationParams, EsmfParams, Estimator, EstimatorError, IdentifyParams, MitEsmf, MitUkf,
     UkfParams,
 };
-use crate::model::{Model, RateModel, RateModelError};
+use crate::model::{MAX_ACTUATORS, Model, RateModel, RateModelError};
 use crate::telemetry::Profile;
 use nalgebra::{SMatrix, SVector};
 use thiserror::Error;
@@ -103,6 +103,28 @@ pub trait VehicleFilters: Send {
     /// Whether a fault is in force, after every step's decisions: the MIT-UKF then moves from
     /// detection to identification ([`IdentifyParams`](super::IdentifyParams)).
     fn set_fault_in_force(&mut self, in_force: bool);
+    /// Actuator `j`'s coefficients as the diagnosis identifies its fault in force from the
+    /// data (`None`: it does not), after every step's [`Self::set_fault_in_force`]. While the
+    /// MIT-UKF identifies, its gamma and delta are reseated from it once per identification
+    /// (a later change of class is the diagnosis' to make, partly from these estimates, so
+    /// following it would confirm it): hovering, a gain and an offset trade along `γ u + δ`, and the
+    /// filter, which takes the gusts for white noise, lets them pick the split; the change test
+    /// reads it from how the output follows the command, weighing the gusts' colour.
+    fn hold_class(&mut self, j: usize, identified: Option<Identified>);
+    /// Whether [`Self::hold_class`] would take an identification of actuator `j` now (the
+    /// MIT-UKF identifies and has not been reseated on it): the diagnosis' fit is computed
+    /// only then.
+    fn awaits_identification(&self, j: usize) -> bool;
+}
+
+/// A fault's coefficients as the diagnosis identifies them (see
+/// [`VehicleFilters::hold_class`]), each with its standard deviation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Identified {
+    pub gamma: f64,
+    pub gamma_std: f64,
+    pub delta: f64,
+    pub delta_std: f64,
 }
 
 /// Seconds from a fault decision to the MIT-UKF's identification (see [`IdentifyParams`]). On
@@ -273,6 +295,11 @@ pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
     pub ukf: MitUkf<RateModel<N, M>, N, M, S>,
     pub esmf: MitEsmf<RateModel<N, M>, N, M>,
     setup: FilterSetup<N, M>,
+    /// Actuators decided faulty whose identification has not been reseated from the
+    /// diagnosis yet (see [`VehicleFilters::hold_class`]).
+    armed: [bool; MAX_ACTUATORS],
+    /// Whether the MIT-UKF identified after the last step's decisions.
+    was_identifying: bool,
 }
 
 impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
@@ -282,6 +309,8 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             ukf: Self::new_ukf(&setup, adapt),
             esmf: Self::new_esmf(&setup, adapt),
             setup,
+            armed: [false; MAX_ACTUATORS],
+            was_identifying: false,
         }
     }
 
@@ -447,12 +476,40 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         p[(di, di)] += self.setup.kalman_p0[(di, di)];
         self.ukf.restart_adaptation();
         self.ukf.restart_identification();
+        if let Some(a) = self.armed.get_mut(j) {
+            *a = true;
+        }
+        // Ended here for the decision, not by a change or the fault's end.
+        self.was_identifying = false;
         super::esmf::add_jump_set_on(&mut self.esmf.esmf.p, &self.setup.set_p0, &[gi, di]);
         self.esmf.esmf.intersect_box();
         self.esmf.schedule.restart();
     }
     fn set_fault_in_force(&mut self, in_force: bool) {
         self.ukf.set_fault_in_force(in_force);
+        // Only the identification that follows a decision is reseated: once it has ended (a
+        // further change, or the fault gone), the data's fit spans that change too (on the SITL
+        // helicopter's hover log, a reseat 3 s after the fault went away held the loss's gain
+        // for 13 s more).
+        let now = self.ukf.identifying();
+        if self.was_identifying && !now {
+            self.armed = [false; MAX_ACTUATORS];
+        }
+        self.was_identifying = now;
+    }
+    fn hold_class(&mut self, j: usize, identified: Option<Identified>) {
+        let l = self.actuators();
+        let Some(c) = identified.filter(|_| j < l && self.awaits_identification(j)) else {
+            return;
+        };
+        self.armed[j] = false;
+        self.ukf.reseat_entries(&[
+            (3 + j, c.gamma, c.gamma_std * c.gamma_std),
+            (3 + l + j, c.delta, c.delta_std * c.delta_std),
+        ]);
+    }
+    fn awaits_identification(&self, j: usize) -> bool {
+        self.ukf.identifying() && self.armed.get(j).copied().unwrap_or(false)
     }
     fn reset(&mut self, filter: usize) {
         let adapt = AdaptationParams::default();
@@ -494,7 +551,8 @@ mod tests {
     /// noise after the onset; 3 s after each decision every AHC entry is capped at q0 and the
     /// rate entries are left as they were; the cap ends at once when no fault is in force; the
     /// recovery releases it within a second (and it returns 3 s later, the fault still in
-    /// force).
+    /// force). The diagnosis' identification is taken once on each identification after a
+    /// decision (`hold_class`), not after the release.
     #[test]
     fn identification_holds_the_ahc_noise_until_a_further_change() {
         use crate::sim::fault::Fault;
@@ -513,6 +571,7 @@ mod tests {
         let at = |t: f64, when: f64| (t - when).abs() < dt / 2.0;
         let (mut raised, mut transitions) = (false, 0);
         let mut released_at = None;
+        let mut awaited = Vec::new();
         for _ in 0..(45.0 / dt) as usize {
             let s = sim.step();
             let y = SVector::<f64, 4>::from_column_slice(&s.y);
@@ -532,6 +591,22 @@ mod tests {
                 transitions += 1;
                 let rates_kept = (0..3).all(|i| pair.ukf.ukf.process_noise[i] == before[i]);
                 assert!(rates_kept, "t = {}: the cap touched the rate entries", s.t);
+                awaited.push(pair.awaits_identification(1));
+                // The third identification takes a reseat; the first two are left waiting.
+                if transitions == 3 {
+                    let id = Identified {
+                        gamma: 0.55,
+                        gamma_std: 0.01,
+                        delta: 0.0,
+                        delta_std: 0.02,
+                    };
+                    pair.hold_class(1, Some(id));
+                    let (x, p) = (&pair.ukf.ukf.x, &pair.ukf.ukf.p);
+                    assert_eq!((x[4], x[8]), (0.55, 0.0));
+                    assert_eq!((p[(4, 4)], p[(4, 8)], p[(0, 4)]), (1e-4, 0.0, 0.0));
+                    assert!(!pair.awaits_identification(1), "reseated twice");
+                    assert!(!pair.awaits_identification(0), "motor 1 was not decided");
+                }
             }
             let held = ahc.clone().all(|i| pair.ukf.ukf.process_noise[i] <= q0[i]);
             let holding = [13.6..19.9, 23.1..23.5, 27.1..40.0];
@@ -552,6 +627,9 @@ mod tests {
         );
         // One hold after each decision, and one 3 s after the release (the fault still in force).
         assert_eq!(transitions, 4);
+        // A reseat is taken on the identification after each decision, not after a release
+        // (the data's fit then spans the further change).
+        assert_eq!(awaited, [true, true, true, false]);
         let at = released_at.expect("the recovery did not release the hold");
         assert!(at < 41.0, "released at {at} s");
         assert_eq!(pair.ukf.releases, 1, "released before the recovery too");

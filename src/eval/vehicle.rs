@@ -175,6 +175,11 @@ pub fn run_vehicle_scenario(
             }
         }
         filters.set_fault_in_force(diag.fault_in_force());
+        for j in 0..l {
+            if filters.awaits_identification(j) {
+                filters.hold_class(j, diag.identified(j));
+            }
+        }
         decisions.append(&mut new_decisions);
         sink.step(&s, &views, &profile);
         // Scores on the watched actuator (the faulty one; actuator 0 in a healthy flight).
