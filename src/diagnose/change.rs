@@ -42,7 +42,7 @@ pub struct Reading {
     pub kind: ChangeKind,
     /// γ (gain), δ (offset) or the stuck output (stuck), normalised command units.
     pub value: f64,
-    /// Its standard deviation from the fit (NaN where the regressor is zero).
+    /// Its standard deviation from the fit.
     pub value_std: f64,
     /// Time of the first sample of the changed stretch.
     pub since: f64,
@@ -326,7 +326,7 @@ impl ChangeTest {
         }
         let cap = self.buf.len();
         let l = self.effects.len();
-        // Per actuator and kind: (drop, samples, θ, residual variance).
+        // Per actuator and kind: see `Fit` (the residual variance in its fourth place).
         let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         let mut mixed = [0.0f64; MAX_ACTUATORS];
         // Per actuator: the best ramp (drop, samples, rate).
@@ -610,7 +610,7 @@ impl ChangeTest {
         }
         let mut acc = [[Acc::default(); 4]; MAX_ACTUATORS];
         let (mut e_y, mut c_sum, mut base) = ([0.0f64; 4], [0.0f64; 4], 0.0);
-        // Per actuator and kind: (drop, samples, θ, Σ y² over the stretch, mean command).
+        // Per actuator and kind: see `Fit` (Σ y² over the stretch in its fourth place).
         let mut best = [[(0.0f64, 0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64); 3]; MAX_ACTUATORS];
         let mut mixed = [0.0f64; MAX_ACTUATORS];
         let mut su = [0.0f64; MAX_ACTUATORS];

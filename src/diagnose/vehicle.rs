@@ -962,18 +962,20 @@ impl Diagnoser {
     }
 
     /// Actuator `j`'s fault in force as the change test identifies it (see
-    /// [`VehicleFilters::hold_class`]): when its reading names `j` with the kind of the class
-    /// in force, that kind's value from the fit, and the coefficient the class leaves alone
-    /// healthy within the tolerance that tells the class (taken as 3σ): a loss leaves the
-    /// bias at 0, a bias the gain at 1, a stuck output has no gain.
+    /// [`crate::estimate::vehicle::VehicleFilters::hold_class`]): when its class is a loss, a
+    /// bias or a stuck output and the reading names `j` with that class's kind, that kind's
+    /// value from the fit, and the coefficient the class leaves alone healthy within the
+    /// tolerance that tells the class (taken as 3σ): a loss leaves the bias at 0, a bias the
+    /// gain at 1, a stuck output has no gain.
     pub fn identified(&self, j: usize) -> Option<Identified> {
         let p = &self.params;
         let class = self.actuators[j].active?;
         let r = self.reading.filter(|r| r.actuator == j)?;
         // A gain or an offset from the fit on the whitened residual where its colour is
-        // learned, for every kind of output: the plain fit weighs the gusts as independent
-        // samples (the simulated plane's elevator loss to 0.5 read as 0.40 ± 0.01 there,
-        // 0.52 ± 0.02 whitened).
+        // learned, for every kind of output (a stuck output from the reading, whitened for a
+        // multirotor's motors): the plain fit weighs the gusts as independent samples (the
+        // simulated plane's elevator loss to 0.5 read as 0.40 ± 0.01 there, 0.52 ± 0.02
+        // whitened).
         let whitened = (r.kind != ChangeKind::Stuck)
             .then(|| self.change.whitened_gain_or_offset(j, r.samples))
             .flatten();

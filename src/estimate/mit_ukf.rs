@@ -231,7 +231,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         let update = GainTransition::new(&SMatrix::identity(), &self.ukf.gain, &self.ukf.h);
         let clear = |m: &mut SMatrix<f64, N, N>| {
             update.sandwich_in_place(m);
-            for &(i, _, _) in entries.iter().filter(|e| e.0 < N) {
+            for &(i, _, _) in entries.iter().filter(|e| super::ukf::reseatable::<N>(e)) {
                 for j in 0..N {
                     m[(i, j)] = 0.0;
                     m[(j, i)] = 0.0;

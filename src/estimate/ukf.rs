@@ -37,6 +37,12 @@ impl Default for UkfParams {
     }
 }
 
+/// An entry [`Ukf::reseat_entries`] takes: a coordinate of the state, a finite value and a
+/// finite positive variance.
+pub(crate) fn reseatable<const N: usize>(&(i, value, var): &(usize, f64, f64)) -> bool {
+    i < N && value.is_finite() && var.is_finite() && var > 0.0
+}
+
 /// UKF over a model with `N` states, `M` measurements and `S = 2N + 1` sigma points.
 #[derive(Debug, Clone)]
 pub struct Ukf<Mo, const N: usize, const M: usize, const S: usize> {
@@ -293,14 +299,12 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     }
 
     /// Set coordinates from knowledge outside the measurements: each `(i, value, var)` gets
-    /// that value and variance, its covariance with every other coordinate cleared (the rest
+    /// that value and variance (others are skipped: see `reseatable`), its covariance with
+    /// every other coordinate cleared (the rest
     /// of `P` is a principal block of a positive matrix, so `P` stays positive). The last
     /// step's gain is cleared, as after [`Self::reseat`].
     pub fn reseat_entries(&mut self, entries: &[(usize, f64, f64)]) {
-        for &(i, value, var) in entries {
-            if i >= N || !(value.is_finite() && var.is_finite() && var > 0.0) {
-                continue;
-            }
+        for &(i, value, var) in entries.iter().filter(|e| reseatable::<N>(e)) {
             self.x[i] = value;
             for j in 0..N {
                 self.p[(i, j)] = 0.0;

@@ -103,17 +103,20 @@ pub trait VehicleFilters: Send {
     /// Whether a fault is in force, after every step's decisions: the MIT-UKF then moves from
     /// detection to identification ([`IdentifyParams`](super::IdentifyParams)).
     fn set_fault_in_force(&mut self, in_force: bool);
-    /// Actuator `j`'s coefficients as the diagnosis identifies its fault in force from the
-    /// data (`None`: it does not), after every step's [`Self::set_fault_in_force`]. While the
-    /// MIT-UKF identifies, its gamma and delta are reseated from it once per identification
-    /// (a later change of class is the diagnosis' to make, partly from these estimates, so
-    /// following it would confirm it): hovering, a gain and an offset trade along `γ u + δ`, and the
-    /// filter, which takes the gusts for white noise, lets them pick the split; the change test
-    /// reads it from how the output follows the command, weighing the gusts' colour.
+    /// Actuator `j`'s fault in force as the diagnosis identifies it from the data (`None`:
+    /// not, or not yet), after a step's [`Self::set_fault_in_force`], when
+    /// [`Self::awaits_identification`]. Hovering, a gain and an offset trade along `γ u + δ`,
+    /// and the MIT-UKF, which takes the gusts for white noise, lets them pick its split; the
+    /// change test reads the split from how the output follows the command, weighing the
+    /// gusts' colour. So during the identification that follows a fault decision, the first
+    /// time the data fit the kind of the class in force, the actuator's gamma and delta are
+    /// reseated from that fit. Once per decision: a later change of class is the diagnosis' to
+    /// make, partly from these estimates, and following it would confirm it; after a release
+    /// (a further change, or the fault gone), the data's fit spans that change too.
     fn hold_class(&mut self, j: usize, identified: Option<Identified>);
     /// Whether [`Self::hold_class`] would take an identification of actuator `j` now (the
-    /// MIT-UKF identifies and has not been reseated on it): the diagnosis' fit is computed
-    /// only then.
+    /// MIT-UKF identifies after a decision on it and has not been reseated on it since): the
+    /// diagnosis' fit is computed only then.
     fn awaits_identification(&self, j: usize) -> bool;
 }
 
@@ -474,6 +477,11 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         let p = &mut self.ukf.ukf.p;
         p[(gi, gi)] += self.setup.kalman_p0[(gi, gi)];
         p[(di, di)] += self.setup.kalman_p0[(di, di)];
+        // A release in this step's update ends the identification for every actuator
+        // before the decision restarts it.
+        if self.was_identifying && !self.ukf.identifying() {
+            self.armed = [false; MAX_ACTUATORS];
+        }
         self.ukf.restart_adaptation();
         self.ukf.restart_identification();
         if let Some(a) = self.armed.get_mut(j) {
@@ -499,7 +507,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
     }
     fn hold_class(&mut self, j: usize, identified: Option<Identified>) {
         let l = self.actuators();
-        let Some(c) = identified.filter(|_| j < l && self.awaits_identification(j)) else {
+        let Some(c) = identified.filter(|_| self.awaits_identification(j)) else {
             return;
         };
         self.armed[j] = false;
@@ -592,20 +600,29 @@ mod tests {
                 let rates_kept = (0..3).all(|i| pair.ukf.ukf.process_noise[i] == before[i]);
                 assert!(rates_kept, "t = {}: the cap touched the rate entries", s.t);
                 awaited.push(pair.awaits_identification(1));
-                // The third identification takes a reseat; the first two are left waiting.
-                if transitions == 3 {
-                    let id = Identified {
-                        gamma: 0.55,
-                        gamma_std: 0.01,
-                        delta: 0.0,
-                        delta_std: 0.02,
-                    };
-                    pair.hold_class(1, Some(id));
-                    let (x, p) = (&pair.ukf.ukf.x, &pair.ukf.ukf.p);
-                    assert_eq!((x[4], x[8]), (0.55, 0.0));
-                    assert_eq!((p[(4, 4)], p[(4, 8)], p[(0, 4)]), (1e-4, 0.0, 0.0));
-                    assert!(!pair.awaits_identification(1), "reseated twice");
-                    assert!(!pair.awaits_identification(0), "motor 1 was not decided");
+                let x_before = pair.ukf.ukf.x;
+                match transitions {
+                    // No fit (yet): nothing reseated, asked again.
+                    1 | 3 => {
+                        pair.hold_class(1, None);
+                        assert_eq!(pair.ukf.ukf.x, x_before);
+                        assert!(pair.awaits_identification(1));
+                    }
+                    2 => {
+                        let id = Identified {
+                            gamma: 0.55,
+                            gamma_std: 0.01,
+                            delta: 0.0,
+                            delta_std: 0.02,
+                        };
+                        pair.hold_class(1, Some(id));
+                        let (x, p) = (&pair.ukf.ukf.x, &pair.ukf.ukf.p);
+                        assert_eq!((x[4], x[8]), (0.55, 0.0));
+                        assert_eq!((p[(4, 4)], p[(4, 8)], p[(0, 4)]), (1e-4, 0.0, 0.0));
+                        assert!(!pair.awaits_identification(1), "reseated twice");
+                        assert!(!pair.awaits_identification(0), "motor 1 was not decided");
+                    }
+                    _ => {}
                 }
             }
             let held = ahc.clone().all(|i| pair.ukf.ukf.process_noise[i] <= q0[i]);
@@ -627,8 +644,9 @@ mod tests {
         );
         // One hold after each decision, and one 3 s after the release (the fault still in force).
         assert_eq!(transitions, 4);
-        // A reseat is taken on the identification after each decision, not after a release
-        // (the data's fit then spans the further change).
+        // A fit is taken during the identification after each decision, not after a release
+        // (the data's fit then spans the further change), even by an actuator still waiting
+        // for one then.
         assert_eq!(awaited, [true, true, true, false]);
         let at = released_at.expect("the recovery did not release the hold");
         assert!(at < 41.0, "released at {at} s");
