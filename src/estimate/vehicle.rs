@@ -109,8 +109,8 @@ pub trait VehicleFilters: Send {
     /// and the MIT-UKF, which takes the gusts for white noise, lets them pick its split; the
     /// change test reads the split from how the output follows the command, weighing the
     /// gusts' colour. So during the identification that follows a fault decision, the first
-    /// time the data fit the kind of the class in force, the actuator's gamma and delta are
-    /// reseated from that fit. Once per decision: a later change of class is the diagnosis' to
+    /// time the data clearly fit the kind of the class in force, the actuator's gamma and
+    /// delta are reseated from that fit. Once per decision: a later change of class is the diagnosis' to
     /// make, partly from these estimates, and following it would confirm it; after a release
     /// (a further change, or the fault gone), the data's fit spans that change too.
     fn hold_class(&mut self, j: usize, identified: Option<Identified>);
