@@ -708,7 +708,7 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// and without / with the reseat from the diagnosis' fit then (`hold_class`): quad motor 2
 /// loss 0.8 / 0.7, hexa motor 3 loss 5.4 / 1.5, plane elevator loss 14.8 / 14.6, quad motor 4
 /// offset 100 / 2.0, hexa motor 5 stuck 100 / 16.2, helicopter swash 2 loss 82.1 / 9.8, tail
-/// offset 23.0 / 7.9. The bounds are 1.4-3 times those (the runs are seeded, but another
+/// offset 23.0 / 7.9. The bounds are 1.4-3.3 times those (the runs are seeded, but another
 /// machine's floating point may move a seed's split). The line itself is not met: the plane's
 /// gains sit low under the 10 % damping mismatch (its aileron's at about 0.9 healthy too, so
 /// on the aileron offset 82 % of the steps are off), and gusts still move the others' beyond

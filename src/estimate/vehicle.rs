@@ -303,6 +303,9 @@ pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
     armed: [bool; MAX_ACTUATORS],
     /// Whether the MIT-UKF identified after the last step's decisions.
     was_identifying: bool,
+    /// A fault was decided in this step (cleared by `set_fault_in_force`, after the step's
+    /// decisions).
+    decided_this_step: bool,
 }
 
 impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
@@ -314,6 +317,7 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             setup,
             armed: [false; MAX_ACTUATORS],
             was_identifying: false,
+            decided_this_step: false,
         }
     }
 
@@ -477,11 +481,13 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         let p = &mut self.ukf.ukf.p;
         p[(gi, gi)] += self.setup.kalman_p0[(gi, gi)];
         p[(di, di)] += self.setup.kalman_p0[(di, di)];
-        // A release in this step's update ends the identification for every actuator
-        // before the decision restarts it.
-        if self.was_identifying && !self.ukf.identifying() {
+        // A further change ends the wait of an actuator decided earlier and not reseated yet:
+        // its fit would span this change too (as after a release). Several decided in one
+        // step all wait.
+        if !self.decided_this_step {
             self.armed = [false; MAX_ACTUATORS];
         }
+        self.decided_this_step = true;
         self.ukf.restart_adaptation();
         self.ukf.restart_identification();
         if let Some(a) = self.armed.get_mut(j) {
@@ -495,6 +501,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
     }
     fn set_fault_in_force(&mut self, in_force: bool) {
         self.ukf.set_fault_in_force(in_force);
+        self.decided_this_step = false;
         // Only the identification that follows a decision is reseated: once it has ended (a
         // further change, or the fault gone), the data's fit spans that change too (on the SITL
         // helicopter's hover log, a reseat 3 s after the fault went away held the loss's gain
@@ -559,8 +566,8 @@ mod tests {
     /// noise after the onset; 3 s after each decision every AHC entry is capped at q0 and the
     /// rate entries are left as they were; the cap ends at once when no fault is in force; the
     /// recovery releases it within a second (and it returns 3 s later, the fault still in
-    /// force). The diagnosis' identification is taken once on each identification after a
-    /// decision (`hold_class`), not after the release.
+    /// force). The diagnosis' fit is awaited on each identification after a decision and taken
+    /// at most once (`hold_class`), not after the release.
     #[test]
     fn identification_holds_the_ahc_noise_until_a_further_change() {
         use crate::sim::fault::Fault;
@@ -644,13 +651,45 @@ mod tests {
         );
         // One hold after each decision, and one 3 s after the release (the fault still in force).
         assert_eq!(transitions, 4);
-        // A fit is taken during the identification after each decision, not after a release
-        // (the data's fit then spans the further change), even by an actuator still waiting
-        // for one then.
+        // A fit is awaited during the identification after each decision; after a release
+        // (the data's fit then spans the further change) it is not, even by an actuator that
+        // was still waiting for one.
         assert_eq!(awaited, [true, true, true, false]);
         let at = released_at.expect("the recovery did not release the hold");
         assert!(at < 41.0, "released at {at} s");
         assert_eq!(pair.ukf.releases, 1, "released before the recovery too");
+    }
+
+    /// Which actuators wait for the diagnosis' fit: those decided in the step that started the
+    /// identification, all of them, and none decided before a further decision.
+    #[test]
+    fn a_further_decision_ends_the_wait_of_the_earlier_ones() {
+        let profile = Profile::resolve("quad-x").unwrap();
+        let mut pair =
+            FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, 0.02).unwrap());
+        let identify = |pair: &mut FilterPair<11, 4, 23>| {
+            for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
+                pair.set_fault_in_force(true);
+            }
+            assert!(pair.ukf.identifying());
+        };
+        let waiting = |pair: &FilterPair<11, 4, 23>| -> Vec<usize> {
+            (0..4).filter(|&j| pair.awaits_identification(j)).collect()
+        };
+        pair.forget(0);
+        pair.set_fault_in_force(true);
+        identify(&mut pair);
+        assert_eq!(waiting(&pair), [0]);
+        // Two decided in one step both wait; motor 1's wait ends.
+        pair.forget(2);
+        pair.forget(3);
+        pair.set_fault_in_force(true);
+        assert!(
+            waiting(&pair).is_empty(),
+            "waiting before the identification"
+        );
+        identify(&mut pair);
+        assert_eq!(waiting(&pair), [2, 3]);
     }
 
     #[test]
