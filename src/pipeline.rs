@@ -916,6 +916,15 @@ impl VehiclePipeline {
                     {
                         r.filters.forget(j);
                     }
+                    // See `VehicleFilters::recovered`.
+                    if d.event == Event::Cleared
+                        && let Some(j) = d
+                            .actuator
+                            .as_deref()
+                            .and_then(|a| r.profile.actuator_index(a))
+                    {
+                        r.filters.recovered(j);
+                    }
                 }
                 r.filters.set_fault_in_force(r.diag.fault_in_force());
                 for j in 0..r.l {
@@ -1609,6 +1618,9 @@ mod tests {
         }
         fn awaits_identification(&self, j: usize) -> bool {
             self.inner.awaits_identification(j)
+        }
+        fn recovered(&mut self, j: usize) {
+            self.inner.recovered(j)
         }
     }
 

@@ -206,6 +206,26 @@ fn quad_plus_hover_motor1_gain_fault() {
     assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     cleared_without_a_new_class(&c, off, "motor1");
     no_class_returns(&c, "motor1");
+    // Once cleared, the MIT-UKF's gain and bias are back at the healthy point: the still
+    // hover cannot move the fault's split of the output back (without the return to the prior
+    // on clearing, gamma stayed at 0.87 and delta at +0.084, bounds excluding 1).
+    let end = c.all.last().map_or(0.0, |(t, _)| *t);
+    assert!(end >= off + 15.0, "the log ends at {end} s");
+    for (t, e) in c.all.iter().filter(|(t, _)| *t >= off + 5.0) {
+        let m = &e[0][0];
+        assert!(
+            (m.gamma - 1.0).abs() <= 0.05 && m.gamma_lo <= 1.0 && 1.0 <= m.gamma_hi,
+            "t = {t}: MIT-UKF gamma {:.3} [{:.3}, {:.3}]",
+            m.gamma,
+            m.gamma_lo,
+            m.gamma_hi
+        );
+        assert!(
+            m.delta.abs() <= 0.02,
+            "t = {t}: MIT-UKF delta {:.3}",
+            m.delta
+        );
+    }
 }
 
 /// Helicopter logs: no `--profile` (the heartbeat says helicopter, the default head is H3-120);

@@ -118,6 +118,13 @@ pub trait VehicleFilters: Send {
     /// MIT-UKF identifies after a decision on it and has not been reseated on it since): the
     /// diagnosis' fit is computed only then.
     fn awaits_identification(&self, j: usize) -> bool;
+    /// Actuator `j`'s fault was cleared: the MIT-UKF's gamma and delta go back to the healthy
+    /// point with their prior spread. The clearing says the effective output is healthy again
+    /// at the operating point; in a still hover the data cannot move the fault's split of it
+    /// back (on the SITL quad's hover log, with its right profile, gamma stayed at 0.87 and
+    /// delta at +0.084 after the fault, bounds excluding 1), and what is known of the split is
+    /// what was known before the fault. The MIT-ESMF's set is left as it is.
+    fn recovered(&mut self, j: usize);
 }
 
 /// A fault's coefficients as the diagnosis identifies them (see
@@ -522,6 +529,16 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             (3 + j, c.gamma, c.gamma_std * c.gamma_std),
             (3 + l + j, c.delta, c.delta_std * c.delta_std),
         ]);
+    }
+    fn recovered(&mut self, j: usize) {
+        let l = self.actuators();
+        if j >= l {
+            return;
+        }
+        let (gi, di) = (3 + j, 3 + l + j);
+        let p0 = &self.setup.kalman_p0;
+        self.ukf
+            .reseat_entries(&[(gi, 1.0, p0[(gi, gi)]), (di, 0.0, p0[(di, di)])]);
     }
     fn awaits_identification(&self, j: usize) -> bool {
         self.ukf.identifying() && self.armed.get(j).copied().unwrap_or(false)

@@ -164,7 +164,8 @@ pub fn run_vehicle_scenario(
         for d in &new_decisions {
             sink.decision(d);
             // As the live pipeline does: a decided fault makes both filters forget what they
-            // knew about that actuator's gain and bias.
+            // knew about that actuator's gain and bias, a cleared one sends the MIT-UKF's back
+            // to the healthy point.
             if d.event == Event::Fault
                 && let Some(j) = d
                     .actuator
@@ -172,6 +173,14 @@ pub fn run_vehicle_scenario(
                     .and_then(|a| profile.actuator_index(a))
             {
                 filters.forget(j);
+            }
+            if d.event == Event::Cleared
+                && let Some(j) = d
+                    .actuator
+                    .as_deref()
+                    .and_then(|a| profile.actuator_index(a))
+            {
+                filters.recovered(j);
             }
         }
         filters.set_fault_in_force(diag.fault_in_force());
