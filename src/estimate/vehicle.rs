@@ -536,9 +536,9 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             return;
         }
         let (gi, di) = (3 + j, 3 + l + j);
-        let p0 = &self.setup.kalman_p0;
+        let (x0, p0) = (&self.setup.x0, &self.setup.kalman_p0);
         self.ukf
-            .reseat_entries(&[(gi, 1.0, p0[(gi, gi)]), (di, 0.0, p0[(di, di)])]);
+            .reseat_entries(&[(gi, x0[gi], p0[(gi, gi)]), (di, x0[di], p0[(di, di)])]);
     }
     fn awaits_identification(&self, j: usize) -> bool {
         self.ukf.identifying() && self.armed.get(j).copied().unwrap_or(false)
