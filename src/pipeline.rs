@@ -908,30 +908,9 @@ impl VehiclePipeline {
                 for d in &r.decisions {
                     sink.decision(d, &r.profile);
                     self.counters.decisions += 1;
-                    if d.event == Event::Fault
-                        && let Some(j) = d
-                            .actuator
-                            .as_deref()
-                            .and_then(|a| r.profile.actuator_index(a))
-                    {
-                        r.filters.forget(j);
-                    }
-                    // See `VehicleFilters::recovered`.
-                    if d.event == Event::Cleared
-                        && let Some(j) = d
-                            .actuator
-                            .as_deref()
-                            .and_then(|a| r.profile.actuator_index(a))
-                    {
-                        r.filters.recovered(j);
-                    }
                 }
-                r.filters.set_fault_in_force(r.diag.fault_in_force());
-                for j in 0..r.l {
-                    if r.filters.awaits_identification(j) {
-                        r.filters.hold_class(j, r.diag.identified(j));
-                    }
-                }
+                r.diag
+                    .steer_filters(&r.decisions, &r.profile, r.filters.as_mut());
                 for j in 0..r.l {
                     self.active[j] = r.diag.active(j);
                 }

@@ -45,7 +45,7 @@
 //! `gain_threshold` has no gain term.
 
 use super::change::{ChangeKind, ChangeTest, KindFit, Reading};
-use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES, Identified};
+use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES, Identified, VehicleFilters};
 use crate::telemetry::{Profile, Role};
 use serde::Serialize;
 
@@ -1030,6 +1030,38 @@ impl Diagnoser {
             _ => return None,
         };
         Some(id)
+    }
+
+    /// What a step's decisions (from [`Self::update`]) tell the filters: a decided fault makes
+    /// both forget what they knew of that actuator's gain and bias, a cleared one sends the
+    /// MIT-UKF's back to the healthy point; then whether a fault is in force, and for an
+    /// actuator whose identification awaits it, the data's fit ([`Self::identified`]).
+    pub fn steer_filters(
+        &self,
+        decisions: &[Decision],
+        profile: &Profile,
+        filters: &mut dyn VehicleFilters,
+    ) {
+        for d in decisions {
+            let Some(j) = d
+                .actuator
+                .as_deref()
+                .and_then(|a| profile.actuator_index(a))
+            else {
+                continue;
+            };
+            match d.event {
+                Event::Fault => filters.forget(j),
+                Event::Cleared => filters.recovered(j),
+                _ => {}
+            }
+        }
+        filters.set_fault_in_force(self.fault_in_force());
+        for j in 0..filters.actuators() {
+            if filters.awaits_identification(j) {
+                filters.hold_class(j, self.identified(j));
+            }
+        }
     }
 
     /// Whether any actuator has a fault decided and not cleared.

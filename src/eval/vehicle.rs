@@ -163,32 +163,9 @@ pub fn run_vehicle_scenario(
         let views = [&est[0][..l], &est[1][..l]];
         for d in &new_decisions {
             sink.decision(d);
-            // As the live pipeline does: a decided fault makes both filters forget what they
-            // knew about that actuator's gain and bias, a cleared one sends the MIT-UKF's back
-            // to the healthy point.
-            if d.event == Event::Fault
-                && let Some(j) = d
-                    .actuator
-                    .as_deref()
-                    .and_then(|a| profile.actuator_index(a))
-            {
-                filters.forget(j);
-            }
-            if d.event == Event::Cleared
-                && let Some(j) = d
-                    .actuator
-                    .as_deref()
-                    .and_then(|a| profile.actuator_index(a))
-            {
-                filters.recovered(j);
-            }
         }
-        filters.set_fault_in_force(diag.fault_in_force());
-        for j in 0..l {
-            if filters.awaits_identification(j) {
-                filters.hold_class(j, diag.identified(j));
-            }
-        }
+        // As the live pipeline does.
+        diag.steer_filters(&new_decisions, &profile, filters.as_mut());
         decisions.append(&mut new_decisions);
         sink.step(&s, &views, &profile);
         // Scores on the watched actuator (the faulty one; actuator 0 in a healthy flight).
