@@ -192,33 +192,15 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     /// depend on q (their rows and columns are cleared), the rest carry `periods` more steps of
     /// their own entry.
     pub fn reseat(&mut self, rates: &[f64], var: &[f64], periods: f64) {
-        // The sensitivities are of the last prediction (dP⁻/dq); the reseat starts from the
-        // updated covariance, so carry them through that update first: (I - K H) M (I - K H)ᵀ
-        // (the identity after a coast or a reseat, whose gain is zero).
-        let update = GainTransition::new(&SMatrix::identity(), &self.ukf.gain, &self.ukf.h);
-        for (i, m) in self.sensitivity.m.iter_mut().enumerate() {
-            if !self.fixed[i] {
-                update.sandwich_in_place(m);
-            }
-        }
-        update.sandwich_in_place(&mut self.fixed_sum);
+        self.carry_through_last_update();
         self.ukf.reseat(rates, var, periods);
         let k = rates.len().min(var.len()).min(N);
-        let clear = |m: &mut SMatrix<f64, N, N>| {
-            for i in 0..k {
-                for j in 0..N {
-                    m[(i, j)] = 0.0;
-                    m[(j, i)] = 0.0;
-                }
-            }
-        };
+        self.clear_sensitivities_of(0..k);
         for (i, m) in self.sensitivity.m.iter_mut().enumerate() {
-            clear(m);
             if i >= k && !self.fixed[i] {
                 m[(i, i)] += periods;
             }
         }
-        clear(&mut self.fixed_sum);
         for i in (k..N).filter(|&i| self.fixed[i]) {
             self.fixed_sum[(i, i)] += periods * self.ukf.process_noise[i];
         }
@@ -228,23 +210,36 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     /// depend on q), after carrying them through the last step's update as [`Self::reseat`]
     /// does.
     pub fn reseat_entries(&mut self, entries: &[(usize, f64, f64)]) {
+        self.carry_through_last_update();
+        let set = entries.iter().filter(|e| super::ukf::reseatable::<N>(e));
+        self.clear_sensitivities_of(set.map(|e| e.0));
+        self.ukf.reseat_entries(entries);
+    }
+
+    /// The sensitivities are of the last prediction (dP⁻/dq); a reseat starts from the
+    /// updated covariance, so they are carried through that update first: (I - K H) M (I - K H)ᵀ
+    /// (the identity after a coast or a reseat, whose gain is zero).
+    fn carry_through_last_update(&mut self) {
         let update = GainTransition::new(&SMatrix::identity(), &self.ukf.gain, &self.ukf.h);
-        let clear = |m: &mut SMatrix<f64, N, N>| {
-            update.sandwich_in_place(m);
-            for &(i, _, _) in entries.iter().filter(|e| super::ukf::reseatable::<N>(e)) {
+        for (i, m) in self.sensitivity.m.iter_mut().enumerate() {
+            if !self.fixed[i] {
+                update.sandwich_in_place(m);
+            }
+        }
+        update.sandwich_in_place(&mut self.fixed_sum);
+    }
+
+    /// Coordinates set from outside no longer depend on q: their rows and columns of every
+    /// sensitivity are cleared.
+    fn clear_sensitivities_of(&mut self, coordinates: impl Iterator<Item = usize> + Clone) {
+        for m in self.sensitivity.m.iter_mut().chain([&mut self.fixed_sum]) {
+            for i in coordinates.clone() {
                 for j in 0..N {
                     m[(i, j)] = 0.0;
                     m[(j, i)] = 0.0;
                 }
             }
-        };
-        for (n, m) in self.sensitivity.m.iter_mut().enumerate() {
-            if !self.fixed[n] {
-                clear(m);
-            }
         }
-        clear(&mut self.fixed_sum);
-        self.ukf.reseat_entries(entries);
     }
 
     /// Tell the filter, after each step's decisions, whether a fault is in force (see

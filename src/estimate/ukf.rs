@@ -285,12 +285,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         let periods = super::outage_periods(periods);
         let k = rates.len().min(var.len()).min(N);
         for i in 0..k {
-            self.x[i] = rates[i];
-            for j in 0..N {
-                self.p[(i, j)] = 0.0;
-                self.p[(j, i)] = 0.0;
-            }
-            self.p[(i, i)] = var[i];
+            self.set_entry(i, rates[i], var[i]);
         }
         for i in k..N {
             self.p[(i, i)] += periods * self.process_noise[i];
@@ -305,14 +300,19 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     /// step's gain is cleared, as after [`Self::reseat`].
     pub fn reseat_entries(&mut self, entries: &[(usize, f64, f64)]) {
         for &(i, value, var) in entries.iter().filter(|e| reseatable::<N>(e)) {
-            self.x[i] = value;
-            for j in 0..N {
-                self.p[(i, j)] = 0.0;
-                self.p[(j, i)] = 0.0;
-            }
-            self.p[(i, i)] = var;
+            self.set_entry(i, value, var);
         }
         self.gain = SMatrix::zeros();
+    }
+
+    /// Coordinate `i` at `value` with variance `var`, uncorrelated with the rest.
+    fn set_entry(&mut self, i: usize, value: f64, var: f64) {
+        self.x[i] = value;
+        for j in 0..N {
+            self.p[(i, j)] = 0.0;
+            self.p[(j, i)] = 0.0;
+        }
+        self.p[(i, i)] = var;
     }
 
     /// ±3σ bounds of coordinate `i`.
