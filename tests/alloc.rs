@@ -1,7 +1,7 @@
 //! The estimator step is the hot path: a counting global allocator shows that 1000 steps of each
 //! filter allocate nothing on the heap.
 
-use ahcmon::estimate::vehicle::Identified;
+use ahcmon::estimate::vehicle::{Identified, IdentifiedKind};
 use ahcmon::estimate::{
     AdaptationParams, Esmf, EsmfParams, KfUkf, MitEsmf, MitUkf, SlaveKfParams, Ukf, UkfParams,
 };
@@ -207,13 +207,15 @@ fn vehicle_filter_steps_allocate_nothing() {
             if k == 500 {
                 assert!(quad.ukf.identifying());
             }
-            // Reseated from the diagnosis once identifying (at the healthy point: the
-            // simulated quad has no fault, and a reseat away from it would end the hold).
+            // Reseated from the diagnosis on every step of the identification (at the healthy
+            // point: the simulated quad has no fault, and a reseat away from it would end the
+            // hold).
             if quad.awaits_identification(1) {
                 reseated += 1;
                 quad.hold_class(
                     1,
                     Some(Identified {
+                        kind: IdentifiedKind::Gain,
                         gamma: 1.0,
                         gamma_std: 0.01,
                         delta: 0.0,
@@ -227,7 +229,10 @@ fn vehicle_filter_steps_allocate_nothing() {
         n, 0,
         "quad: {n} allocations in 1000 steps, coasts and reseats"
     );
-    assert_eq!(reseated, 1, "the identification was not reseated once");
+    assert!(
+        reseated >= 150,
+        "the identification was followed on {reseated} steps only"
+    );
     // Eight actuators: the quad's motors twice over (an X8-like coaxial layout).
     let mut octo = profile.clone();
     let mut extra = octo.actuators.clone();

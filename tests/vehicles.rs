@@ -704,25 +704,26 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 
 /// Issue 4's "the MIT-UKF's gamma within 0.05 of truth within 5 s", as the share of steps
 /// after onset + 5 s with gamma more than 0.05 off the simulator's truth, mean over seeds 1-10.
-/// Measured (mean %), with the gains' and biases' noise capped at q0 from 3 s after a decision
-/// and without / with the reseat from the diagnosis' fit then (`hold_class`): quad motor 2
-/// loss 0.8 / 0.7, hexa motor 3 loss 5.4 / 1.5, plane elevator loss 14.8 / 14.6, quad motor 4
-/// offset 100 / 2.0, hexa motor 5 stuck 100 / 16.2, helicopter swash 2 loss 82.1 / 9.8, tail
-/// offset 23.0 / 7.9. The bounds are 1.4-3.3 times those (the runs are seeded, but another
-/// machine's floating point may move a seed's split). The line itself is not met: the plane's
-/// gains sit low under the 10 % damping mismatch (its aileron's at about 0.9 healthy too, so
-/// on the aileron offset 82 % of the steps are off), and gusts still move the others' beyond
-/// 0.05 now and then (see the README).
+/// Measured (mean %): reseated once from the diagnosis' fit (`hold_class`) / held at the fit
+/// on every step it stays clear and of the kind first taken: quad motor 2 loss 0.7 / 0.0,
+/// hexa motor 3 loss 1.5 / 0.0, plane elevator loss 14.6 / 12.5, quad motor 4 offset 2.0 /
+/// 1.9, hexa motor 5 stuck 16.2 / 12.9, helicopter swash 2 loss 9.8 / 0.0, tail offset 7.9 /
+/// 2.8, plane aileron offset 81.8 / 34.7. The bounds are about twice those, and at least 2
+/// (the runs are seeded, but another machine's floating point may move a seed's split: on
+/// seeds 11-40 one seed of swash 2 has 75 % of its steps off). The line itself is not met:
+/// gusts still move the gains beyond 0.05 now and then, most on the plane, whose gains sit
+/// low under the 10 % damping mismatch where the data do not hold them (see the README).
 #[test]
 fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
     for (name, bound) in [
         ("quad-x-motor2-loe", 2.0),
-        ("hexa-x-motor3-loe", 5.0),
-        ("plane-elevator-loe", 20.0),
-        ("quad-x-motor4-bias", 5.0),
-        ("hexa-x-motor5-stuck", 30.0),
-        ("heli-swash2-loe", 20.0),
-        ("heli-tail-bias", 16.0),
+        ("hexa-x-motor3-loe", 2.0),
+        ("plane-elevator-loe", 25.0),
+        ("quad-x-motor4-bias", 4.0),
+        ("hexa-x-motor5-stuck", 25.0),
+        ("heli-swash2-loe", 4.0),
+        ("heli-tail-bias", 6.0),
+        ("plane-aileron-bias", 60.0),
     ] {
         let shares: Vec<f64> = (1..=10)
             .map(|seed| {

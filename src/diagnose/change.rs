@@ -528,6 +528,11 @@ impl ChangeTest {
         if !(noise_var > 0.0 && drop.is_finite() && mixed_drop.is_finite()) {
             return None;
         }
+        // Stuck at s: the output is s whatever the command, so the residual is s b - b u,
+        // and the whitened y + g is s times the whitened offset regressor.
+        let stuck_value = (oy + go) / ox;
+        let stuck_var =
+            ((base + 2.0 * gy + gx - stuck_value * (oy + go)) / (n * rows) as f64).max(0.0);
         Some(KindFit {
             kind,
             value,
@@ -535,6 +540,8 @@ impl ChangeTest {
             margin: (drop - other) / noise_var,
             mixed_margin: (mixed_drop - drop) / noise_var,
             command_mean: su / n as f64,
+            stuck_value,
+            stuck_std: (stuck_var / ox).sqrt(),
         })
     }
 }
@@ -711,6 +718,10 @@ pub struct KindFit {
     pub margin: f64,
     pub mixed_margin: f64,
     pub command_mean: f64,
+    /// The output's value if it is stuck (gain 0), from the same whitened residual, and its
+    /// standard deviation.
+    pub stuck_value: f64,
+    pub stuck_std: f64,
 }
 
 /// The most samples a [`ChangeTest`] keeps.
@@ -1214,7 +1225,8 @@ mod tests {
         }
     }
 
-    /// A gain or an offset change of actuator 0 from step 1400 of 1800 (the store keeps 100
+    /// A gain or an offset change of actuator 0, or its output stuck at `theta`, from step 1400
+    /// of 1800 (the store keeps 100
     /// samples from before it), under a wind-like
     /// residual (its slow part 10 times the sensor noise), with the command moving a few per
     /// cent about 0.5 (a hovering motor's).
@@ -1231,6 +1243,7 @@ mod tests {
             let s = match (k >= 1400, kind) {
                 (false, _) => 0.0,
                 (true, ChangeKind::Gain) => (theta - 1.0) * u[0],
+                (true, ChangeKind::Stuck) => theta - u[0],
                 (true, _) => theta,
             };
             let mut r = *r;
@@ -1292,6 +1305,20 @@ mod tests {
             println!("{kind:?}: RMS z {rms:.2}");
             assert!((0.7..=1.5).contains(&rms), "{kind:?}: RMS z {rms:.2}");
         }
+        // A motor stuck a little above its hovering command: the stuck value from the same
+        // whitened residual (the reading tells the kind).
+        let theta = 0.545;
+        let z: Vec<f64> = (1..=30)
+            .map(|seed| {
+                let fit = hover_change(ChangeKind::Stuck, theta, seed)
+                    .whitened_gain_or_offset(0, 400)
+                    .expect("colour learned");
+                (fit.stuck_value - theta) / fit.stuck_std
+            })
+            .collect();
+        let rms = rms_z(&z);
+        println!("Stuck: RMS z {rms:.2}");
+        assert!((0.7..=1.5).contains(&rms), "Stuck: RMS z {rms:.2}");
     }
 
     #[test]

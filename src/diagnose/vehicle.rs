@@ -45,7 +45,9 @@
 //! `gain_threshold` has no gain term.
 
 use super::change::{ChangeKind, ChangeTest, KindFit, Reading};
-use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES, Identified, VehicleFilters};
+use crate::estimate::vehicle::{
+    AhcEstimate, FILTER_NAMES, Identified, IdentifiedKind, VehicleFilters,
+};
 use crate::telemetry::{Profile, Role};
 use serde::Serialize;
 
@@ -974,14 +976,18 @@ impl Diagnoser {
         // A gain or an offset from the fit on the whitened residual where its colour is
         // learned, for every kind of output: the plain fit weighs the gusts as independent
         // samples (the simulated plane's elevator loss to 0.5 read as 0.40 ± 0.01 there,
-        // 0.52 ± 0.02 whitened). A stuck output from the reading, which is the plain search's
-        // while a fault is in force.
-        let whitened = (r.kind != ChangeKind::Stuck)
-            .then(|| self.change.whitened_gain_or_offset(j, r.samples))
-            .flatten();
-        let (kind, value, std) = whitened.map_or((r.kind, r.value, r.value_std), |f| {
-            (f.kind, f.value, f.value_std)
-        });
+        // 0.52 ± 0.02 whitened). A stuck output is told from the reading, which is the plain
+        // search's while a fault is in force, and its value taken from the whitened residual
+        // too where it can be: the plain spread counts the gusts as independent samples (on
+        // the hexa's motor stuck at 0.55 it gave ±0.005 to readings 0.01 off).
+        let fit = self.change.whitened_gain_or_offset(j, r.samples);
+        let whitened = fit.filter(|_| r.kind != ChangeKind::Stuck);
+        let (kind, value, std) = match (r.kind, fit) {
+            (ChangeKind::Stuck, Some(f)) => (r.kind, f.stuck_value, f.stuck_std),
+            _ => whitened.map_or((r.kind, r.value, r.value_std), |f| {
+                (f.kind, f.value, f.value_std)
+            }),
+        };
         // Only a clear fit, by the class logic's tests (`step_class_of`) but with the margins
         // of the fit taken: over the other kinds, over a gain and an offset together, on a
         // stretch of `CLASS_MIN_S`, and a motor's offset only on the whitened residual. A
@@ -1010,18 +1016,21 @@ impl Diagnoser {
         }
         let id = match (class, kind) {
             (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => Identified {
+                kind: IdentifiedKind::Gain,
                 gamma: value,
                 gamma_std: std,
                 delta: 0.0,
                 delta_std: p.bias_tau / 3.0,
             },
             (FaultClass::Bias, ChangeKind::Offset) => Identified {
+                kind: IdentifiedKind::Offset,
                 gamma: 1.0,
                 gamma_std: p.loe_tau / 3.0,
                 delta: value,
                 delta_std: std,
             },
             (FaultClass::Stuck, ChangeKind::Stuck) => Identified {
+                kind: IdentifiedKind::Stuck,
                 gamma: 0.0,
                 gamma_std: p.stuck_gamma / 3.0,
                 delta: value,
@@ -1035,7 +1044,7 @@ impl Diagnoser {
     /// What a step's decisions (from [`Self::update`]) tell the filters: a decided fault makes
     /// both forget what they knew of that actuator's gain and bias, a cleared one sends the
     /// MIT-UKF's back to the healthy point; then whether a fault is in force, and for an
-    /// actuator whose identification awaits it, the data's fit ([`Self::identified`]).
+    /// actuator whose identification is awaited or followed, the data's fit ([`Self::identified`]).
     pub fn steer_filters(
         &self,
         decisions: &[Decision],

@@ -106,16 +106,18 @@ pub trait VehicleFilters: Send {
     /// Actuator `j`'s fault in force as the diagnosis identifies it from the data (`None`:
     /// not, or not yet), after a step's [`Self::set_fault_in_force`], when
     /// [`Self::awaits_identification`]. Hovering, a gain and an offset trade along `γ u + δ`,
-    /// and the MIT-UKF, which takes the gusts for white noise, lets them pick its split; the
-    /// change test reads the split from how the output follows the command, weighing the
-    /// gusts' colour. So during the identification that follows a fault decision, the first
-    /// time the data clearly fit the kind of the class in force, the actuator's gamma and
-    /// delta are reseated from that fit. Once per decision: a later change of class is the diagnosis' to
-    /// make, partly from these estimates, and following it would confirm it; after a release
-    /// (a further change, or the fault gone), the data's fit spans that change too.
+    /// and the MIT-UKF, which takes the gusts for white noise, lets them pick its split and
+    /// then wander with them (the gusts move the commands the controller makes against them);
+    /// the change test reads the split from how the output follows the command, weighing the
+    /// gusts' colour, from every sample since the change. So during the identification that
+    /// follows a fault decision, each step the data clearly fit the kind of the class in
+    /// force, the actuator's gamma and delta are reseated from that fit, of the kind first
+    /// taken only: a later change of class is the diagnosis' to make, partly from these
+    /// estimates, and following it would confirm it. After a release (a further change, or
+    /// the fault gone), the data's fit spans that change too, and nothing is reseated.
     fn hold_class(&mut self, j: usize, identified: Option<Identified>);
     /// Whether [`Self::hold_class`] would take an identification of actuator `j` now (the
-    /// MIT-UKF identifies after a decision on it and has not been reseated on it since): the
+    /// MIT-UKF identifies after a decision on it, and no release has ended that since): the
     /// diagnosis' fit is computed only then.
     fn awaits_identification(&self, j: usize) -> bool;
     /// Actuator `j`'s fault was cleared: the MIT-UKF's gamma and delta go back to the healthy
@@ -131,10 +133,31 @@ pub trait VehicleFilters: Send {
 /// [`VehicleFilters::hold_class`]), each with its standard deviation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Identified {
+    pub kind: IdentifiedKind,
     pub gamma: f64,
     pub gamma_std: f64,
     pub delta: f64,
     pub delta_std: f64,
+}
+
+/// What changed, as the diagnosis identifies it: the gain (a loss), the offset (a bias) or both
+/// (a stuck output).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IdentifiedKind {
+    Gain,
+    Offset,
+    Stuck,
+}
+
+/// Where an actuator's identification stands (see [`VehicleFilters::hold_class`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Following {
+    /// No decision to identify (none, or its identification ended).
+    Idle,
+    /// Decided; no clear identification yet.
+    Awaiting,
+    /// Reseated from an identification of this kind, and held there while it stays clear.
+    Kind(IdentifiedKind),
 }
 
 /// Seconds from a fault decision to the MIT-UKF's identification (see [`IdentifyParams`]). On
@@ -305,9 +328,9 @@ pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
     pub ukf: MitUkf<RateModel<N, M>, N, M, S>,
     pub esmf: MitEsmf<RateModel<N, M>, N, M>,
     setup: FilterSetup<N, M>,
-    /// Actuators decided faulty whose identification has not been reseated from the
-    /// diagnosis yet (see [`VehicleFilters::hold_class`]).
-    armed: [bool; MAX_ACTUATORS],
+    /// Per actuator, whether its identification is awaited or followed (see
+    /// [`VehicleFilters::hold_class`]).
+    following: [Following; MAX_ACTUATORS],
     /// Whether the MIT-UKF identified after the last step's decisions.
     was_identifying: bool,
     /// A fault was decided in this step (cleared by `set_fault_in_force`, after the step's
@@ -322,7 +345,7 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             ukf: Self::new_ukf(&setup, adapt),
             esmf: Self::new_esmf(&setup, adapt),
             setup,
-            armed: [false; MAX_ACTUATORS],
+            following: [Following::Idle; MAX_ACTUATORS],
             was_identifying: false,
             decided_this_step: false,
         }
@@ -488,17 +511,17 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         let p = &mut self.ukf.ukf.p;
         p[(gi, gi)] += self.setup.kalman_p0[(gi, gi)];
         p[(di, di)] += self.setup.kalman_p0[(di, di)];
-        // A further change ends the wait of an actuator decided earlier and not reseated yet:
-        // its fit would span this change too (as after a release). Several decided in one
+        // A further change ends the identification of an actuator decided earlier, awaited or
+        // followed: its fit would span this change too (as after a release). Several decided in one
         // step all wait.
         if !self.decided_this_step {
-            self.armed = [false; MAX_ACTUATORS];
+            self.following = [Following::Idle; MAX_ACTUATORS];
         }
         self.decided_this_step = true;
         self.ukf.restart_adaptation();
         self.ukf.restart_identification();
-        if let Some(a) = self.armed.get_mut(j) {
-            *a = true;
+        if let Some(a) = self.following.get_mut(j) {
+            *a = Following::Awaiting;
         }
         // Ended here for the decision, not by a change or the fault's end.
         self.was_identifying = false;
@@ -515,7 +538,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // for 13 s more).
         let now = self.ukf.identifying();
         if self.was_identifying && !now {
-            self.armed = [false; MAX_ACTUATORS];
+            self.following = [Following::Idle; MAX_ACTUATORS];
         }
         self.was_identifying = now;
     }
@@ -524,7 +547,12 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         let Some(c) = identified.filter(|_| self.awaits_identification(j)) else {
             return;
         };
-        self.armed[j] = false;
+        // Another kind than the one followed is the diagnosis' to decide, partly from these
+        // estimates: following it would confirm it.
+        if matches!(self.following[j], Following::Kind(k) if k != c.kind) {
+            return;
+        }
+        self.following[j] = Following::Kind(c.kind);
         self.ukf.reseat_entries(&[
             (3 + j, c.gamma, c.gamma_std * c.gamma_std),
             (3 + l + j, c.delta, c.delta_std * c.delta_std),
@@ -541,7 +569,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             .reseat_entries(&[(gi, x0[gi], p0[(gi, gi)]), (di, x0[di], p0[(di, di)])]);
     }
     fn awaits_identification(&self, j: usize) -> bool {
-        self.ukf.identifying() && self.armed.get(j).copied().unwrap_or(false)
+        self.ukf.identifying() && self.following.get(j).is_some_and(|f| *f != Following::Idle)
     }
     fn reset(&mut self, filter: usize) {
         let adapt = AdaptationParams::default();
@@ -583,8 +611,8 @@ mod tests {
     /// noise after the onset; 3 s after each decision every AHC entry is capped at q0 and the
     /// rate entries are left as they were; the cap ends at once when no fault is in force; the
     /// recovery releases it within a second (and it returns 3 s later, the fault still in
-    /// force). The diagnosis' fit is awaited on each identification after a decision and taken
-    /// at most once (`hold_class`), not after the release.
+    /// force). The diagnosis' fit is awaited on each identification after a decision and
+    /// followed while it stays of one kind (`hold_class`), not after the release.
     #[test]
     fn identification_holds_the_ahc_noise_until_a_further_change() {
         use crate::sim::fault::Fault;
@@ -633,18 +661,35 @@ mod tests {
                         assert!(pair.awaits_identification(1));
                     }
                     2 => {
-                        let id = Identified {
-                            gamma: 0.55,
+                        let loss = |gamma| Identified {
+                            kind: IdentifiedKind::Gain,
+                            gamma,
                             gamma_std: 0.01,
                             delta: 0.0,
                             delta_std: 0.02,
                         };
-                        pair.hold_class(1, Some(id));
+                        pair.hold_class(1, Some(loss(0.55)));
                         let (x, p) = (&pair.ukf.ukf.x, &pair.ukf.ukf.p);
                         assert_eq!((x[4], x[8]), (0.55, 0.0));
                         assert_eq!((p[(4, 4)], p[(4, 8)], p[(0, 4)]), (1e-4, 0.0, 0.0));
-                        assert!(!pair.awaits_identification(1), "reseated twice");
                         assert!(!pair.awaits_identification(0), "motor 1 was not decided");
+                        // Followed while it stays clear and of the same kind.
+                        assert!(pair.awaits_identification(1), "no longer followed");
+                        pair.hold_class(1, Some(loss(0.57)));
+                        assert_eq!(pair.ukf.ukf.x[4], 0.57);
+                        // Another kind is the diagnosis' to decide: not followed, and the
+                        // loss still is.
+                        let offset = Identified {
+                            kind: IdentifiedKind::Offset,
+                            gamma: 1.0,
+                            gamma_std: 0.03,
+                            delta: -0.2,
+                            delta_std: 0.01,
+                        };
+                        pair.hold_class(1, Some(offset));
+                        assert_eq!((pair.ukf.ukf.x[4], pair.ukf.ukf.x[8]), (0.57, 0.0));
+                        pair.hold_class(1, Some(loss(0.56)));
+                        assert_eq!(pair.ukf.ukf.x[4], 0.56);
                     }
                     _ => {}
                 }
