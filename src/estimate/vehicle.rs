@@ -101,7 +101,7 @@ pub trait VehicleFilters: Send {
     /// slowly from the healthy values.
     fn forget(&mut self, j: usize);
     /// Whether a fault is in force, after every step's decisions: the MIT-UKF then moves from
-    /// detection to identification ([`IdentifyParams`](super::IdentifyParams)).
+    /// detection to identification ([`IdentifyParams`]).
     fn set_fault_in_force(&mut self, in_force: bool);
     /// Actuator `j`'s fault in force as the diagnosis identifies it from the data (`None`:
     /// not, or not yet), after a step's [`Self::set_fault_in_force`], when

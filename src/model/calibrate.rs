@@ -5,7 +5,7 @@
 //! which is the finite-difference fit without the Euler error; then `D = -ln(a) / dt`,
 //! `G = b / hold`, `c = c' / hold` with `hold = (1 - a) / D`. The vertical specific force row
 //! (when present) is `a_z = Σ g_z,j u_j + c_z`. The rate regressor is instrumented by the
-//! previous sample (see [`instrumental`]); [`calibrate_arx`] says why it is not.
+//! previous sample (see `instrumental`); [`calibrate_arx`] says why it is not.
 
 use super::{ArxParams, RateParams};
 use nalgebra::{DMatrix, DVector};
