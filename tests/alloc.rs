@@ -252,3 +252,48 @@ fn vehicle_filter_steps_allocate_nothing() {
     });
     assert_eq!(n, 0, "octo: {n} allocations in 200 steps");
 }
+
+/// The diagnosis' fit runs on every step of a decided fault's identification (see
+/// `VehicleFilters::hold_class`): the whitened fit and the change search allocate nothing.
+#[test]
+fn the_change_tests_fits_allocate_nothing() {
+    use ahcmon::diagnose::change::ChangeTest;
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let effects = vec![
+        [1.0, 0.0, 0.2, 0.0],
+        [0.0, 1.0, -0.2, 0.0],
+        [-0.5, -0.5, 1.0, 0.0],
+    ];
+    let mut test = ChangeTest::new(effects, [1.0; 4], 3, 300, 10, 600);
+    // A slow wind-like residual (deterministic), then actuator 0's output 0.1 low.
+    let mut wind = [0.0f64; 3];
+    for k in 0..1500 {
+        let t = k as f64 * 0.02;
+        let u = [
+            0.5 + 0.04 * (7.0 * t).sin(),
+            0.5,
+            0.5 + 0.03 * (3.0 * t).cos(),
+        ];
+        let mut r = [0.0; 4];
+        for (i, w) in wind.iter_mut().enumerate() {
+            *w = 0.97 * *w + 0.01 * ((k * (i + 3)) as f64 * 0.7).sin();
+            r[i] = *w;
+        }
+        let changed = k >= 1300;
+        if changed {
+            r[0] -= 0.1;
+            r[2] -= 0.02;
+        }
+        test.push(t, &r, &u, !changed);
+    }
+    assert!(test.colour_learned());
+    let mut fits = 0;
+    let n = count(|| {
+        for k in 0..1000 {
+            fits += usize::from(test.whitened_gain_or_offset(k % 3, 200).is_some());
+            fits += usize::from(test.evaluate().is_some());
+        }
+    });
+    assert_eq!(n, 0, "{n} allocations in 1000 fits and searches");
+    assert_eq!(fits, 2000, "a fit or a reading missing");
+}

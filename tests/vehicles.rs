@@ -707,21 +707,22 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// Measured (mean %): reseated once from the diagnosis' fit (`hold_class`) / held at the fit
 /// on every step it stays clear and of the kind first taken: quad motor 2 loss 0.7 / 0.0,
 /// hexa motor 3 loss 1.5 / 0.0, plane elevator loss 14.6 / 12.5, quad motor 4 offset 2.0 /
-/// 1.9, hexa motor 5 stuck 16.2 / 12.9, helicopter swash 2 loss 9.8 / 0.0, tail offset 7.9 /
-/// 2.8, plane aileron offset 81.8 / 34.7. The bounds are about twice those, and at least 2
-/// (the runs are seeded, but another machine's floating point may move a seed's split: on
-/// seeds 11-40 one seed of swash 2 has 75 % of its steps off). The line itself is not met:
+/// 1.9, hexa motor 5 stuck 16.2 / 10.1, helicopter swash 2 loss 9.8 / 0.0, tail offset 7.9 /
+/// 2.8, plane aileron offset 81.8 / 34.7. The bounds leave room for a seed's split to move
+/// (the runs are seeded, but another machine's floating point may move one: on seeds 11-40
+/// one seed of swash 2 has 75 % of its steps off, 7.5 on a mean over 10), and those of swash
+/// 2, the tail and the aileron are below what the single reseat gave. The line is not met:
 /// gusts still move the gains beyond 0.05 now and then, most on the plane, whose gains sit
 /// low under the 10 % damping mismatch where the data do not hold them (see the README).
 #[test]
 fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
     for (name, bound) in [
         ("quad-x-motor2-loe", 2.0),
-        ("hexa-x-motor3-loe", 2.0),
+        ("hexa-x-motor3-loe", 5.0),
         ("plane-elevator-loe", 25.0),
-        ("quad-x-motor4-bias", 4.0),
-        ("hexa-x-motor5-stuck", 25.0),
-        ("heli-swash2-loe", 4.0),
+        ("quad-x-motor4-bias", 5.0),
+        ("hexa-x-motor5-stuck", 20.0),
+        ("heli-swash2-loe", 8.0),
         ("heli-tail-bias", 6.0),
         ("plane-aileron-bias", 60.0),
     ] {
@@ -738,4 +739,22 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
             "{name}: {mean:.1} % of steps off ({shares:?})"
         );
     }
+}
+
+/// A stuck output's value comes from the change test's residual whitened by the gusts'
+/// colour (`KindFit::stuck_value`): the plain search's spread counts the gusts as independent
+/// samples, and held at it the MIT-UKF's bounds missed the hexa's stuck motor 5 (stuck at
+/// 0.55) more often. Truth inside the MIT-UKF's bounds, mean over seeds 1-10 (all steps):
+/// plain 54.2 %, whitened 75.5 %.
+#[test]
+fn a_stuck_motors_value_is_held_with_the_whitened_spread() {
+    let inside: Vec<f64> = (1..=10)
+        .map(|seed| {
+            let r = run("hexa-x-motor5-stuck", seed);
+            assert_eq!(r.filters[0].filter, "mit-ukf");
+            r.filters[0].metrics.truth_in_bounds_pct
+        })
+        .collect();
+    let mean = inside.iter().sum::<f64>() / inside.len() as f64;
+    assert!(mean >= 65.0, "{mean:.1} % inside ({inside:?})");
 }

@@ -109,16 +109,18 @@ pub trait VehicleFilters: Send {
     /// and the MIT-UKF, which takes the gusts for white noise, lets them pick its split and
     /// then wander with them (the gusts move the commands the controller makes against them);
     /// the change test reads the split from how the output follows the command, weighing the
-    /// gusts' colour, from every sample since the change. So during the identification that
-    /// follows a fault decision, each step the data clearly fit the kind of the class in
-    /// force, the actuator's gamma and delta are reseated from that fit, of the kind first
-    /// taken only: a later change of class is the diagnosis' to make, partly from these
-    /// estimates, and following it would confirm it. After a release (a further change, or
-    /// the fault gone), the data's fit spans that change too, and nothing is reseated.
+    /// gusts' colour, over the samples since the change (its last 6 s at most). So during the
+    /// identification that follows a fault decision, each step the data clearly fit the kind
+    /// of the class in force, the actuator's gamma and delta are reseated from that fit, of
+    /// the kind first taken only: a later change of class is the diagnosis' to make, partly
+    /// from these estimates, and following it would confirm it (a fit of another kind is
+    /// ignored). After a release (a further change, or the fault gone), a clearing or a
+    /// further decision, the data's fit spans that change too, and nothing is reseated.
     fn hold_class(&mut self, j: usize, identified: Option<Identified>);
-    /// Whether [`Self::hold_class`] would take an identification of actuator `j` now (the
-    /// MIT-UKF identifies after a decision on it, and no release has ended that since): the
-    /// diagnosis' fit is computed only then.
+    /// Whether [`Self::hold_class`] is asked for actuator `j` now (the MIT-UKF identifies after
+    /// a decision on it, and no release, clearing or further decision has ended that since;
+    /// a fit of another kind than the one followed is then still ignored): the diagnosis' fit
+    /// is computed only then.
     fn awaits_identification(&self, j: usize) -> bool;
     /// Actuator `j`'s fault was cleared: the MIT-UKF's gamma and delta go back to the healthy
     /// point with their prior spread. The clearing says the effective output is healthy again
@@ -564,6 +566,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             return;
         }
         let (gi, di) = (3 + j, 3 + l + j);
+        self.following[j] = Following::Idle;
         let (x0, p0) = (&self.setup.x0, &self.setup.kalman_p0);
         self.ukf
             .reseat_entries(&[(gi, x0[gi], p0[(gi, gi)]), (di, x0[di], p0[(di, di)])]);
@@ -575,6 +578,9 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         let adapt = AdaptationParams::default();
         if filter == 0 {
             self.ukf = Self::new_ukf(&self.setup, adapt);
+            // A fresh MIT-UKF identifies nothing until the next decision.
+            self.following = [Following::Idle; MAX_ACTUATORS];
+            self.was_identifying = false;
         } else {
             self.esmf = Self::new_esmf(&self.setup, adapt);
         }
@@ -632,6 +638,13 @@ mod tests {
         let (mut raised, mut transitions) = (false, 0);
         let mut released_at = None;
         let mut awaited = Vec::new();
+        let loss = |gamma| Identified {
+            kind: IdentifiedKind::Gain,
+            gamma,
+            gamma_std: 0.01,
+            delta: 0.0,
+            delta_std: 0.02,
+        };
         for _ in 0..(45.0 / dt) as usize {
             let s = sim.step();
             let y = SVector::<f64, 4>::from_column_slice(&s.y);
@@ -654,20 +667,18 @@ mod tests {
                 awaited.push(pair.awaits_identification(1));
                 let x_before = pair.ukf.ukf.x;
                 match transitions {
-                    // No fit (yet): nothing reseated, asked again.
+                    // No fit (yet): nothing reseated, asked again. On the third, a fit comes next
+                    // and is followed (until the release, which the fourth checks).
                     1 | 3 => {
                         pair.hold_class(1, None);
                         assert_eq!(pair.ukf.ukf.x, x_before);
                         assert!(pair.awaits_identification(1));
+                        if transitions == 3 {
+                            pair.hold_class(1, Some(loss(0.5)));
+                            assert_eq!(pair.ukf.ukf.x[4], 0.5);
+                        }
                     }
                     2 => {
-                        let loss = |gamma| Identified {
-                            kind: IdentifiedKind::Gain,
-                            gamma,
-                            gamma_std: 0.01,
-                            delta: 0.0,
-                            delta_std: 0.02,
-                        };
                         pair.hold_class(1, Some(loss(0.55)));
                         let (x, p) = (&pair.ukf.ukf.x, &pair.ukf.ukf.p);
                         assert_eq!((x[4], x[8]), (0.55, 0.0));
@@ -714,16 +725,17 @@ mod tests {
         // One hold after each decision, and one 3 s after the release (the fault still in force).
         assert_eq!(transitions, 4);
         // A fit is awaited during the identification after each decision; after a release
-        // (the data's fit then spans the further change) it is not, even by an actuator that
-        // was still waiting for one.
+        // (the data's fit then spans the further change) it is not, even by an actuator whose
+        // fit was followed.
         assert_eq!(awaited, [true, true, true, false]);
         let at = released_at.expect("the recovery did not release the hold");
         assert!(at < 41.0, "released at {at} s");
         assert_eq!(pair.ukf.releases, 1, "released before the recovery too");
     }
 
-    /// Which actuators wait for the diagnosis' fit: those decided in the step that started the
-    /// identification, all of them, and none decided before a further decision.
+    /// Which actuators wait for the diagnosis' fit or follow it: those decided in the step that
+    /// started the identification, all of them, and none decided before a further decision,
+    /// cleared, or before the MIT-UKF was reset.
     #[test]
     fn a_further_decision_ends_the_wait_of_the_earlier_ones() {
         let profile = Profile::resolve("quad-x").unwrap();
@@ -742,7 +754,17 @@ mod tests {
         pair.set_fault_in_force(true);
         identify(&mut pair);
         assert_eq!(waiting(&pair), [0]);
-        // Two decided in one step both wait; motor 1's wait ends.
+        let offset = Identified {
+            kind: IdentifiedKind::Offset,
+            gamma: 1.0,
+            gamma_std: 0.05,
+            delta: -0.15,
+            delta_std: 0.01,
+        };
+        pair.hold_class(0, Some(offset));
+        assert_eq!(pair.ukf.ukf.x[7], -0.15);
+        assert_eq!(waiting(&pair), [0], "no longer followed");
+        // Two decided in one step both wait; motor 1's identification, followed, ends.
         pair.forget(2);
         pair.forget(3);
         pair.set_fault_in_force(true);
@@ -752,6 +774,11 @@ mod tests {
         );
         identify(&mut pair);
         assert_eq!(waiting(&pair), [2, 3]);
+        // A clearing ends one's, and a fresh MIT-UKF (after numerical failure) all of them.
+        pair.recovered(2);
+        assert_eq!(waiting(&pair), [3]);
+        pair.reset(0);
+        assert!(waiting(&pair).is_empty());
     }
 
     #[test]
