@@ -1292,33 +1292,29 @@ mod tests {
         // 30 seeds of each: with the spread right, the RMS of the standardised errors is 1
         // (0.75-1.25 holds 95 % of 30-sample draws); the colour is learned, not given, so a
         // little more is allowed, and well below or above is wrong.
-        for (kind, theta) in [(ChangeKind::Offset, -0.15), (ChangeKind::Gain, 0.7)] {
+        // A motor stuck a little above its hovering command too: its value from the same
+        // whitened residual (the reading tells the kind).
+        let cases = [
+            (ChangeKind::Offset, -0.15),
+            (ChangeKind::Gain, 0.7),
+            (ChangeKind::Stuck, 0.545),
+        ];
+        for (kind, theta) in cases {
             let z: Vec<f64> = (1..=30)
                 .map(|seed| {
                     let fit = hover_change(kind, theta, seed)
                         .whitened_gain_or_offset(0, 400)
                         .expect("colour learned");
-                    (fit.value - theta) / fit.value_std
+                    match kind {
+                        ChangeKind::Stuck => (fit.stuck_value - theta) / fit.stuck_std,
+                        _ => (fit.value - theta) / fit.value_std,
+                    }
                 })
                 .collect();
             let rms = rms_z(&z);
             println!("{kind:?}: RMS z {rms:.2}");
             assert!((0.7..=1.5).contains(&rms), "{kind:?}: RMS z {rms:.2}");
         }
-        // A motor stuck a little above its hovering command: the stuck value from the same
-        // whitened residual (the reading tells the kind).
-        let theta = 0.545;
-        let z: Vec<f64> = (1..=30)
-            .map(|seed| {
-                let fit = hover_change(ChangeKind::Stuck, theta, seed)
-                    .whitened_gain_or_offset(0, 400)
-                    .expect("colour learned");
-                (fit.stuck_value - theta) / fit.stuck_std
-            })
-            .collect();
-        let rms = rms_z(&z);
-        println!("Stuck: RMS z {rms:.2}");
-        assert!((0.7..=1.5).contains(&rms), "Stuck: RMS z {rms:.2}");
     }
 
     #[test]
