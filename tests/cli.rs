@@ -1492,3 +1492,36 @@ fn a_slow_stream_is_said_to_be_slow() {
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("the samples come at"), "{err}");
 }
+
+/// The demo's stream replayed (calibration on its first 23 s, then swash 2's loss to 0.6 at
+/// 32 s and the tail's +0.15 offset at 45 s, with swash 2's still in force): at the end the
+/// MIT-UKF's tail bias is near +0.15 and the healthy swash servos' biases near 0. Held at the
+/// change test's fit of the tail, whose residual still held swash 2's loss, it read +0.08 and
+/// put -0.34 into both healthy servos' biases.
+#[test]
+fn a_second_fault_is_identified_by_the_filter_with_the_first_in_force() {
+    let dir = common::temp_dir("cli_demo_second_fault");
+    let (tlog, est) = (dir.join("demo.tlog"), dir.join("est.jsonl"));
+    sim_tlog("heli-demo", &tlog, &[]);
+    let (t, e) = (tlog.to_str().unwrap(), est.to_str().unwrap());
+    let (code, _, err) = ahcmon(&["replay", t, "--headless", "--estimates", e]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&est).unwrap();
+    let last = text
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|o| o["filter"] == "mit-ukf")
+        .last()
+        .expect("estimates");
+    let delta = |name: &str| {
+        let a = last["actuators"].as_array().unwrap();
+        let a = a.iter().find(|a| a["name"] == name).unwrap();
+        a["delta"].as_f64().unwrap()
+    };
+    let tail = delta("tail");
+    assert!((tail - 0.15).abs() < 0.04, "tail delta {tail}: {last}");
+    for servo in ["swash1", "swash3"] {
+        let d = delta(servo);
+        assert!(d.abs() < 0.1, "{servo} delta {d}: {last}");
+    }
+}
