@@ -1510,8 +1510,7 @@ fn a_second_fault_is_identified_by_the_filter_with_the_first_in_force() {
     let last = text
         .lines()
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
-        .filter(|o| o["filter"] == "mit-ukf")
-        .last()
+        .rfind(|o| o["filter"] == "mit-ukf")
         .expect("estimates");
     let delta = |name: &str| {
         let a = last["actuators"].as_array().unwrap();
