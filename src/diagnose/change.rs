@@ -1226,10 +1226,9 @@ mod tests {
     }
 
     /// A gain or an offset change of actuator 0, or its output stuck at `theta`, from step 1400
-    /// of 1800 (the store keeps 100
-    /// samples from before it), under a wind-like
-    /// residual (its slow part 10 times the sensor noise), with the command moving a few per
-    /// cent about 0.5 (a hovering motor's).
+    /// of 1800 (the store keeps 100 samples from before it), under a wind-like residual (its
+    /// slow part 10 times the sensor noise), with the command moving a few per cent about 0.5
+    /// (a hovering motor's).
     fn hover_change(kind: ChangeKind, theta: f64, seed: u64) -> ChangeTest {
         let b = effects();
         let mut rng = Rng::new(seed);

@@ -1053,7 +1053,8 @@ impl Diagnoser {
     /// What a step's decisions (from [`Self::update`]) tell the filters: a decided fault makes
     /// both forget what they knew of that actuator's gain and bias, a cleared one sends the
     /// MIT-UKF's back to the healthy point; then whether a fault is in force, and for an
-    /// actuator whose identification is awaited or followed, the data's fit ([`Self::identified`]).
+    /// actuator whose identification is awaited or followed, the data's fit
+    /// ([`Self::identified`]).
     pub fn steer_filters(
         &self,
         decisions: &[Decision],

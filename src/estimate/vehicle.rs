@@ -514,8 +514,8 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         p[(gi, gi)] += self.setup.kalman_p0[(gi, gi)];
         p[(di, di)] += self.setup.kalman_p0[(di, di)];
         // A further change ends the identification of an actuator decided earlier, awaited or
-        // followed: its fit would span this change too (as after a release). Several decided in one
-        // step all wait.
+        // followed: its fit would span this change too (as after a release). Several decided
+        // in one step all wait.
         if !self.decided_this_step {
             self.following = [Following::Idle; MAX_ACTUATORS];
         }
