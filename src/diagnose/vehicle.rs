@@ -1023,31 +1023,28 @@ impl Diagnoser {
         if !(value.is_finite() && std.is_finite() && std > 0.0) {
             return None;
         }
-        let id = match (class, kind) {
-            (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => Identified {
-                kind: IdentifiedKind::Gain,
-                gamma: value,
-                gamma_std: std,
-                delta: 0.0,
-                delta_std: p.bias_tau / 3.0,
-            },
-            (FaultClass::Bias, ChangeKind::Offset) => Identified {
-                kind: IdentifiedKind::Offset,
-                gamma: 1.0,
-                gamma_std: p.loe_tau / 3.0,
-                delta: value,
-                delta_std: std,
-            },
-            (FaultClass::Stuck, ChangeKind::Stuck) => Identified {
-                kind: IdentifiedKind::Stuck,
-                gamma: 0.0,
-                gamma_std: p.stuck_gamma / 3.0,
-                delta: value,
-                delta_std: std,
-            },
+        // The changed coefficient from the fit; the other at its healthy value (a stuck
+        // output has no gain), with the tolerance that tells the class as 3σ.
+        let fitted = (value, std);
+        let (kind, gamma, delta) = match (class, kind) {
+            (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => {
+                (IdentifiedKind::Gain, fitted, (0.0, p.bias_tau / 3.0))
+            }
+            (FaultClass::Bias, ChangeKind::Offset) => {
+                (IdentifiedKind::Offset, (1.0, p.loe_tau / 3.0), fitted)
+            }
+            (FaultClass::Stuck, ChangeKind::Stuck) => {
+                (IdentifiedKind::Stuck, (0.0, p.stuck_gamma / 3.0), fitted)
+            }
             _ => return None,
         };
-        Some(id)
+        Some(Identified {
+            kind,
+            gamma: gamma.0,
+            gamma_std: gamma.1,
+            delta: delta.0,
+            delta_std: delta.1,
+        })
     }
 
     /// What a step's decisions (from [`Self::update`]) tell the filters: a decided fault makes
