@@ -513,12 +513,9 @@ impl ChangeTest {
         }
         let (gain_drop, offset_drop) = (gy * gy / gx, oy * oy / ox);
         let det = gx * ox - go * go;
-        let mixed_drop = if det > 1e-9 * gx * ox {
-            let (a, d) = ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det);
-            a * gy + d * oy
-        } else {
-            gain_drop.max(offset_drop)
-        };
+        let pair =
+            (det > 1e-9 * gx * ox).then(|| ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det));
+        let mixed_drop = pair.map_or(gain_drop.max(offset_drop), |(a, d)| a * gy + d * oy);
         let (kind, value, drop, other, ss) = if offset_drop > gain_drop {
             (ChangeKind::Offset, oy / ox, offset_drop, gain_drop, ox)
         } else {
@@ -533,6 +530,11 @@ impl ChangeTest {
         let stuck_value = (oy + go) / ox;
         let stuck_var =
             ((base + 2.0 * gy + gx - stuck_value * (oy + go)) / (n * rows) as f64).max(0.0);
+        // The gain fitted with the offset free, in the pair's own residual noise.
+        let pair_var = ((base - mixed_drop) / (n * rows) as f64).max(0.0);
+        let (pair_gamma, pair_gamma_std) = pair.map_or((f64::NAN, f64::INFINITY), |(a, _)| {
+            (1.0 + a, (pair_var * ox / det).sqrt())
+        });
         Some(KindFit {
             kind,
             value,
@@ -542,6 +544,8 @@ impl ChangeTest {
             command_mean: su / n as f64,
             stuck_value,
             stuck_std: (stuck_var / ox).sqrt(),
+            pair_gamma,
+            pair_gamma_std,
         })
     }
 }
@@ -722,6 +726,11 @@ pub struct KindFit {
     /// standard deviation.
     pub stuck_value: f64,
     pub stuck_std: f64,
+    /// The gain fitted together with the offset (the offset free), and its standard
+    /// deviation, in the same whitened residual (NaN and infinite where the two regressors
+    /// cannot be told apart).
+    pub pair_gamma: f64,
+    pub pair_gamma_std: f64,
 }
 
 /// The most samples a [`ChangeTest`] keeps.
@@ -1298,21 +1307,32 @@ mod tests {
             (ChangeKind::Gain, 0.7),
             (ChangeKind::Stuck, 0.545),
         ];
+        // The gain fitted with the offset free too: the offset's gain is 1, a stuck one's 0.
         for (kind, theta) in cases {
-            let z: Vec<f64> = (1..=30)
+            let gamma = match kind {
+                ChangeKind::Offset => 1.0,
+                ChangeKind::Gain => theta,
+                _ => 0.0,
+            };
+            let (z, z_pair): (Vec<f64>, Vec<f64>) = (1..=30)
                 .map(|seed| {
                     let fit = hover_change(kind, theta, seed)
                         .whitened_gain_or_offset(0, 400)
                         .expect("colour learned");
+                    let z_pair = (fit.pair_gamma - gamma) / fit.pair_gamma_std;
                     match kind {
-                        ChangeKind::Stuck => (fit.stuck_value - theta) / fit.stuck_std,
-                        _ => (fit.value - theta) / fit.value_std,
+                        ChangeKind::Stuck => ((fit.stuck_value - theta) / fit.stuck_std, z_pair),
+                        _ => ((fit.value - theta) / fit.value_std, z_pair),
                     }
                 })
-                .collect();
-            let rms = rms_z(&z);
-            println!("{kind:?}: RMS z {rms:.2}");
+                .unzip();
+            let (rms, rms_pair) = (rms_z(&z), rms_z(&z_pair));
+            println!("{kind:?}: RMS z {rms:.2}, of the pair's gain {rms_pair:.2}");
             assert!((0.7..=1.5).contains(&rms), "{kind:?}: RMS z {rms:.2}");
+            assert!(
+                (0.7..=1.5).contains(&rms_pair),
+                "{kind:?}: pair RMS z {rms_pair:.2}"
+            );
         }
     }
 
