@@ -51,6 +51,9 @@ pub struct MitUkf<Mo, const N: usize, const M: usize, const S: usize> {
     /// How many times identification was given up because the innovations' mean left what the
     /// noise can explain (a further change: the fault grew, or went away).
     pub releases: u64,
+    /// AHC entries held at most at q0 even while not identifying: those of an actuator
+    /// identified before a further decision (see `FilterPair::forget`).
+    pub keep_capped: [bool; N],
 }
 
 /// When the MIT-UKF stops raising its gains' and biases' noise once a fault is decided.
@@ -102,6 +105,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
             in_force_steps: 0,
             identifying: false,
             releases: 0,
+            keep_capped: [false; N],
         }
     }
 
@@ -147,7 +151,8 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
             for i in (0..N).filter(|&i| !self.fixed[i]) {
                 let q = self.ukf.process_noise[i];
                 let next = gn_step(q, grad[i], curv[i], eta, self.q0[i], &self.adapt);
-                self.ukf.process_noise[i] = if self.identifying && i >= ahc {
+                self.ukf.process_noise[i] = if (self.identifying || self.keep_capped[i]) && i >= ahc
+                {
                     next.min(self.q0[i])
                 } else {
                     next
@@ -251,6 +256,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
         if !in_force {
             self.in_force_steps = 0;
             self.identifying = false;
+            self.keep_capped = [false; N];
             return;
         }
         self.in_force_steps += 1;
