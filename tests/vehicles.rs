@@ -710,12 +710,15 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// 1.9, hexa motor 5 stuck 16.2 / 10.1, helicopter swash 2 loss 9.8 / 0.0, tail offset 7.9 /
 /// 2.8, plane aileron offset 81.8 / 34.7; with the unchanged gain's spread from the fit
 /// (see the stuck motor's test below) quad motor 4 1.5, hexa motor 5 8.2, aileron 33.3, the
-/// others as they were. The bounds leave room for a seed's split to move
-/// (the runs are seeded, but another machine's floating point may move one: on seeds 11-40
-/// one seed of swash 2 has 75 % of its steps off, 7.5 on a mean over 10), and those of swash
-/// 2, the tail and the aileron are below what the single reseat gave. The line is not met:
-/// gusts still move the gains beyond 0.05 now and then, most on the plane, whose gains sit
-/// low under the 10 % damping mismatch where the data do not hold them (see the README).
+/// others as they were; with the update after each reseat leaving the decided actuator's
+/// gain and bias (consider states) tail offset 0.0, elevator 11.7, hexa motor 5 8.4, aileron
+/// 3.7 (an offset's gain is then the class's 1 while the fit is clear). The bounds leave room
+/// for a seed's split to move (the runs are seeded, but another machine's floating point may
+/// move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a mean over
+/// 10), and those of swash 2, the tail and the aileron are below what the reseat without the
+/// consider update gave. The line is not met: the gusts still move the gains beyond 0.05 on
+/// some seeds, most the plane's elevator, whose fit the 10 % damping mismatch biases too
+/// (see the README).
 #[test]
 fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
     for (name, bound) in [
@@ -725,8 +728,8 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
         ("quad-x-motor4-bias", 5.0),
         ("hexa-x-motor5-stuck", 20.0),
         ("heli-swash2-loe", 8.0),
-        ("heli-tail-bias", 6.0),
-        ("plane-aileron-bias", 60.0),
+        ("heli-tail-bias", 2.0),
+        ("plane-aileron-bias", 12.0),
     ] {
         let shares: Vec<f64> = (1..=10)
             .map(|seed| {

@@ -73,6 +73,10 @@ pub struct Ukf<Mo, const N: usize, const M: usize, const S: usize> {
     /// measured).
     pub h: SMatrix<f64, M, N>,
     pub h_offset: SVector<f64, M>,
+    /// Entries the updates leave as they are (consider states, Schmidt's filter): their gain
+    /// rows are zero, so their estimates and variances stay while their covariances with the
+    /// rest still shape the others' update (the Joseph form holds for any gain).
+    pub consider: [bool; N],
 }
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N, M, S> {
@@ -118,6 +122,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
             nis: 0.0,
             h,
             h_offset,
+            consider: [false; N],
         }
     }
 
@@ -221,7 +226,10 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
         symmetrize(&mut s);
         let s_chol = cholesky_jitter(&s, "innovation covariance")?;
         // K = Pxy S⁻¹  <=>  Kᵀ = S⁻¹ Pxyᵀ (S symmetric).
-        let gain = s_chol.solve(&pxy.transpose()).transpose();
+        let mut gain = s_chol.solve(&pxy.transpose()).transpose();
+        for i in (0..N).filter(|&i| self.consider[i]) {
+            gain.row_mut(i).fill(0.0);
+        }
         let e = y - y_pred;
         self.nis = e.dot(&s_chol.solve(&e));
         let scale = if self.nis > self.params.innovation_clip_nis {
