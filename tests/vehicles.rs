@@ -712,11 +712,12 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// (see the stuck motor's test below) quad motor 4 1.5, hexa motor 5 8.2, aileron 33.3, the
 /// others as they were; with the update after each reseat leaving the decided actuator's
 /// gain and bias (consider states) tail offset 0.0, elevator 11.7, hexa motor 5 8.4, aileron
-/// 3.7 (an offset's gain is then the class's 1 while the fit is clear). The bounds leave room
-/// for a seed's split to move (the runs are seeded, but another machine's floating point may
-/// move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a mean over
-/// 10), and those of swash 2, the tail and the aileron are below what the reseat without the
-/// consider update gave. The line is not met: the gusts still move the gains beyond 0.05 on
+/// 3.7 (an offset's gain is then the class's 1 while the fit is clear); with the release at
+/// the chi-square 99.99 % quantile hexa motor 5 3.1, elevator 8.8, aileron 0.0. The bounds
+/// leave room for a seed's split to move (the runs are seeded, but another machine's floating
+/// point may move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a
+/// mean over 10), and those of the tail, hexa motor 5 and the aileron are below what came
+/// before the consider update and the release's quantile. The line is not met: the gusts still move the gains beyond 0.05 on
 /// some seeds, most the plane's elevator, whose fit the 10 % damping mismatch biases too
 /// (see the README).
 #[test]
@@ -724,12 +725,12 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
     for (name, bound) in [
         ("quad-x-motor2-loe", 2.0),
         ("hexa-x-motor3-loe", 5.0),
-        ("plane-elevator-loe", 25.0),
+        ("plane-elevator-loe", 20.0),
         ("quad-x-motor4-bias", 5.0),
-        ("hexa-x-motor5-stuck", 20.0),
+        ("hexa-x-motor5-stuck", 10.0),
         ("heli-swash2-loe", 8.0),
         ("heli-tail-bias", 2.0),
-        ("plane-aileron-bias", 12.0),
+        ("plane-aileron-bias", 5.0),
     ] {
         let shares: Vec<f64> = (1..=10)
             .map(|seed| {

@@ -74,9 +74,10 @@ pub struct IdentifyParams {
     /// fault.
     pub after_steps: u64,
     /// The hold ends (and its delay restarts) when `μᵀ S⁻¹ μ` of the window's innovation mean μ
-    /// exceeds this, the chi-square 99.9 % quantile: with the filter's S right, noise of any
-    /// colour does that on at most 0.1 % of windows (fully correlated over the window, μ is one
-    /// draw of N(0, S); white, its spread is n times smaller).
+    /// exceeds this, a chi-square quantile (the vehicles' filters take 99.99 %): with the
+    /// filter's S right, noise of any colour does that on at most 0.01 % of windows (fully
+    /// correlated over the window, μ is one draw of N(0, S); white, its spread is n times
+    /// smaller).
     pub release_chi2: f64,
 }
 
