@@ -714,7 +714,7 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// gain and bias (consider states) tail offset 0.0, elevator 11.7, hexa motor 5 8.4, aileron
 /// 3.7 (an offset's gain is then the class's 1 while the fit is clear); with the release at
 /// the chi-square 99.99 % quantile hexa motor 5 3.1, elevator 8.8, aileron 0.0; followed
-/// again after a release when the fit is where it was, hexa motor 5 1.4. The bounds
+/// again after a release when the fit is where it was, hexa motor 5 1.3. The bounds
 /// leave room for a seed's split to move (the runs are seeded, but another machine's floating
 /// point may move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a
 /// mean over 10), and those of the tail, hexa motor 5 and the aileron are below what came

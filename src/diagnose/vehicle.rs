@@ -1033,19 +1033,25 @@ impl Diagnoser {
         // with the fit's spread the plane's elevator loss had more steps off in a trial
         // (12.5 to 16.4 %).
         let fitted = (value, std);
-        let pair_gamma_std = fit.map_or(f64::INFINITY, |f| f.pair_gamma_std);
+        // Only where the pair's own gain agrees with the class's (within 3σ): a partly
+        // responding output is not pinned at 0 with a narrow spread.
+        let pair_gamma_std = |class_gamma: f64| {
+            fit.filter(|f| f.pair_gamma_std > 0.0)
+                .filter(|f| (f.pair_gamma - class_gamma).abs() <= 3.0 * f.pair_gamma_std)
+                .map_or(f64::INFINITY, |f| f.pair_gamma_std)
+        };
         let (kind, gamma, delta) = match (class, kind) {
             (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => {
                 (IdentifiedKind::Gain, fitted, (0.0, p.bias_tau / 3.0))
             }
             (FaultClass::Bias, ChangeKind::Offset) => (
                 IdentifiedKind::Offset,
-                (1.0, (p.loe_tau / 3.0).min(pair_gamma_std)),
+                (1.0, (p.loe_tau / 3.0).min(pair_gamma_std(1.0))),
                 fitted,
             ),
             (FaultClass::Stuck, ChangeKind::Stuck) => (
                 IdentifiedKind::Stuck,
-                (0.0, (p.stuck_gamma / 3.0).min(pair_gamma_std)),
+                (0.0, (p.stuck_gamma / 3.0).min(pair_gamma_std(0.0))),
                 fitted,
             ),
             _ => return None,

@@ -98,7 +98,9 @@ pub trait VehicleFilters: Send {
     /// Forget what both filters knew about actuator `j`'s gain and bias (its prior uncertainty
     /// is added back) and restart the step-size schedules: called when a fault is decided on
     /// it, so the estimates re-converge from the data since the change instead of fading
-    /// slowly from the healthy values.
+    /// slowly from the healthy values. Another actuator whose identification was followed
+    /// until then (or until a release at most 2 s before) goes back to its last fit, its noise
+    /// capped at q0 while a fault is in force.
     fn forget(&mut self, j: usize);
     /// Whether a fault is in force, after every step's decisions: the MIT-UKF then moves from
     /// detection to identification ([`IdentifyParams`]).
@@ -115,16 +117,18 @@ pub trait VehicleFilters: Send {
     /// the kind first taken only: a later change of class is the diagnosis' to make, partly
     /// from these estimates, and following it would confirm it (a fit of another kind is
     /// ignored). After a clearing or a further decision the data's fit spans that change too,
-    /// and nothing is reseated. After a release (the innovations say a further change: the
+    /// and it is not followed (a further decision puts an actuator followed until then back at
+    /// its last fit: [`Self::forget`]). After a release (the innovations say a further change: the
     /// fault grew or went away, or a strong gust) the fit is followed again, once the
     /// identification resumes, only when it names the kind followed with the changed
     /// coefficient within 3σ of the last fit (of the two fits' spreads): a gust leaves the
     /// fit where it was, a fault's end moves it.
     fn hold_class(&mut self, j: usize, identified: Option<Identified>);
     /// Whether [`Self::hold_class`] is asked for actuator `j` now (the MIT-UKF identifies after
-    /// a decision on it, and no clearing or further decision has ended that since; a fit of
-    /// another kind than the one followed, or after a release one away from the last, is then
-    /// still ignored): the diagnosis' fit is computed only then.
+    /// a decision on it, and no clearing or further decision has ended that since, nor a
+    /// release before its fit was first followed; a fit of another kind than the one followed,
+    /// or after a release one away from the last, is then still ignored): the diagnosis' fit
+    /// is computed only then.
     fn awaits_identification(&self, j: usize) -> bool;
     /// Actuator `j`'s fault was cleared: the MIT-UKF's gamma and delta go back to the healthy
     /// point with their prior spread. The clearing says the effective output is healthy again
@@ -174,6 +178,10 @@ enum Following {
 /// between gain and offset that the onset's transient gave, and cleared the fault 1.3-2.3 s
 /// later after it went away; from 3 s and 5 s the decisions were those without the hold.
 const IDENTIFY_AFTER_S: f64 = 3.0;
+
+/// Seconds from a release of the identification to a decision on another actuator within which
+/// an actuator followed until that release keeps its last fit (`FilterPair::forget`).
+const RELEASE_TO_DECISION_S: f64 = 2.0;
 
 /// Delta of range outputs (motors, throttle): random-walk std and prior std, as fractions of
 /// the profile's (see `FilterSetup::from_profile`).
@@ -340,9 +348,10 @@ pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
     /// Per actuator, whether its identification is awaited or followed (see
     /// [`VehicleFilters::hold_class`]).
     following: [Following; MAX_ACTUATORS],
-    /// Actuators whose identification was followed until a release or a further decision,
-    /// while the fault stays in force.
-    followed_before: [bool; MAX_ACTUATORS],
+    /// Steps with a fault in force (`set_fault_in_force` calls), and that count at the last
+    /// release of the identification.
+    steps: u64,
+    released_at: u64,
     /// The last identification each followed actuator was reseated from.
     last_fit: [Option<Identified>; MAX_ACTUATORS],
     /// Whether the MIT-UKF identified after the last step's decisions.
@@ -360,19 +369,12 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             esmf: Self::new_esmf(&setup, adapt),
             setup,
             following: [Following::Idle; MAX_ACTUATORS],
-            followed_before: [false; MAX_ACTUATORS],
+            steps: 0,
+            released_at: 0,
             last_fit: [None; MAX_ACTUATORS],
             was_identifying: false,
             decided_this_step: false,
         }
-    }
-
-    /// End the identification of every actuator, remembering those followed.
-    fn end_following(&mut self) {
-        for (before, f) in self.followed_before.iter_mut().zip(&self.following) {
-            *before |= matches!(f, Following::Kind(_));
-        }
-        self.following = [Following::Idle; MAX_ACTUATORS];
     }
 
     fn new_ukf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitUkf<RateModel<N, M>, N, M, S> {
@@ -553,19 +555,31 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // already, it held the gain of a fault that had gone away (the SITL quad hover log
         // cleared 1.6 s later).
         if !self.decided_this_step {
-            self.end_following();
-            for k in (0..l).filter(|&k| k != j && self.followed_before[k]) {
-                self.ukf.keep_capped[3 + k] = true;
-                self.ukf.keep_capped[3 + l + k] = true;
-                if let Some(c) = self.last_fit[k] {
-                    self.ukf.reseat_entries(&[
-                        (3 + k, c.gamma, c.gamma_std * c.gamma_std),
-                        (3 + l + k, c.delta, c.delta_std * c.delta_std),
-                    ]);
+            // A release longer ago than this was not this change's (the demo's tail: its
+            // release came 0.4-1.4 s before its decision): it may be the followed fault's end.
+            let recent = (RELEASE_TO_DECISION_S / Model::dt(&self.setup.model)) as u64;
+            let released_recently = self.steps - self.released_at <= recent;
+            for k in (0..l).filter(|&k| k != j) {
+                let kept = match self.following[k] {
+                    Following::Kind(_) => true,
+                    Following::Released(_) => released_recently,
+                    _ => false,
+                };
+                let Some(c) = self.last_fit[k].filter(|_| kept) else {
+                    continue;
+                };
+                for i in [3 + k, 3 + l + k] {
+                    self.ukf.keep_capped[i] = true;
+                    let q = &mut self.ukf.ukf.process_noise[i];
+                    *q = q.min(self.ukf.q0[i]);
                 }
+                self.ukf.reseat_entries(&[
+                    (3 + k, c.gamma, c.gamma_std * c.gamma_std),
+                    (3 + l + k, c.delta, c.delta_std * c.delta_std),
+                ]);
             }
+            self.following = [Following::Idle; MAX_ACTUATORS];
         }
-        self.followed_before[j] = false;
         self.ukf.keep_capped[gi] = false;
         self.ukf.keep_capped[di] = false;
         self.decided_this_step = true;
@@ -592,19 +606,19 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // resumed, had left the plane's aileron offset (seed 38) off by more than 0.05 on 96 %
         // of its last 20 s (resumed, 15 %; seeds 11-40, mean 19.6 -> 8.8 %).
         let now = self.ukf.identifying();
+        if in_force {
+            self.steps += 1;
+        }
         if self.was_identifying && !now {
-            for (before, f) in self.followed_before.iter_mut().zip(&mut self.following) {
+            self.released_at = self.steps;
+            for f in &mut self.following {
                 *f = match *f {
-                    Following::Kind(k) | Following::Released(k) => {
-                        *before = true;
-                        Following::Released(k)
-                    }
+                    Following::Kind(k) | Following::Released(k) => Following::Released(k),
                     _ => Following::Idle,
                 };
             }
         }
         if !in_force {
-            self.followed_before = [false; MAX_ACTUATORS];
             self.following = [Following::Idle; MAX_ACTUATORS];
         }
         self.was_identifying = now;
@@ -638,12 +652,14 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // those the fit has already weighed with their colour, and moved the aileron's gain,
         // reseated at 1, by up to 0.15 in that one step (off by more than 0.05 after onset +
         // 5 s on 33.3 % of the steps, seeds 1-10; so left, 3.7 %). With no gusts, 0 %.
-        self.ukf.ukf.consider[3 + j] = true;
-        self.ukf.ukf.consider[3 + l + j] = true;
-        self.ukf.reseat_entries(&[
+        let entries = [
             (3 + j, c.gamma, c.gamma_std * c.gamma_std),
             (3 + l + j, c.delta, c.delta_std * c.delta_std),
-        ]);
+        ];
+        for e in entries.iter().filter(|e| super::ukf::reseatable::<N>(e)) {
+            self.ukf.ukf.consider[e.0] = true;
+        }
+        self.ukf.reseat_entries(&entries);
     }
     fn recovered(&mut self, j: usize) {
         let l = self.actuators();
@@ -652,7 +668,6 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         }
         let (gi, di) = (3 + j, 3 + l + j);
         self.following[j] = Following::Idle;
-        self.followed_before[j] = false;
         self.ukf.keep_capped[gi] = false;
         self.ukf.keep_capped[di] = false;
         let (x0, p0) = (&self.setup.x0, &self.setup.kalman_p0);
@@ -668,7 +683,6 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             self.ukf = Self::new_ukf(&self.setup, adapt);
             // A fresh MIT-UKF identifies nothing until the next decision.
             self.following = [Following::Idle; MAX_ACTUATORS];
-            self.followed_before = [false; MAX_ACTUATORS];
             self.was_identifying = false;
         } else {
             self.esmf = Self::new_esmf(&self.setup, adapt);
@@ -707,7 +721,8 @@ mod tests {
     /// rate entries are left as they were; the cap ends at once when no fault is in force; the
     /// recovery releases it within a second (and it returns 3 s later, the fault still in
     /// force). The diagnosis' fit is awaited on each identification after a decision and
-    /// followed while it stays of one kind (`hold_class`), not after the release.
+    /// followed while it stays of one kind (`hold_class`); after the release, once its fit is
+    /// back where the last one was.
     #[test]
     fn identification_holds_the_ahc_noise_until_a_further_change() {
         use crate::sim::fault::Fault;
@@ -797,6 +812,12 @@ mod tests {
                     4 => {
                         pair.hold_class(1, Some(loss(0.95)));
                         assert_eq!(pair.ukf.ukf.x, x_before);
+                        let offset = Identified {
+                            kind: IdentifiedKind::Offset,
+                            ..loss(0.5)
+                        };
+                        pair.hold_class(1, Some(offset));
+                        assert_eq!(pair.ukf.ukf.x, x_before, "another kind");
                         pair.hold_class(1, Some(loss(0.53)));
                         assert_eq!(pair.ukf.ukf.x[4], 0.53);
                         pair.hold_class(1, Some(loss(0.6)));
@@ -975,8 +996,25 @@ mod tests {
         assert!(pair.ukf.keep_capped[3]);
         pair.recovered(0);
         assert!(!pair.ukf.keep_capped.iter().any(|c| *c));
+        // No fault in force: the caps go, and nothing followed before is kept.
+        identify(&mut pair);
+        pair.hold_class(1, Some(loss));
+        pair.forget(3);
+        assert!(pair.ukf.keep_capped[4]);
         pair.set_fault_in_force(false);
+        assert!(!pair.ukf.keep_capped.iter().any(|c| *c));
+        pair.forget(2);
+        assert!(!pair.ukf.keep_capped.iter().any(|c| *c));
+        // A release long before the decision may have been the followed fault's end: not kept.
         pair.forget(1);
+        identify(&mut pair);
+        pair.hold_class(1, Some(loss));
+        pair.ukf.restart_identification();
+        pair.set_fault_in_force(true);
+        for _ in 0..=(RELEASE_TO_DECISION_S / 0.02) as usize {
+            pair.set_fault_in_force(true);
+        }
+        pair.forget(2);
         assert!(!pair.ukf.keep_capped.iter().any(|c| *c));
     }
 
