@@ -714,7 +714,8 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// gain and bias (consider states) tail offset 0.0, elevator 11.7, hexa motor 5 8.4, aileron
 /// 3.7 (an offset's gain is then the class's 1 while the fit is clear); with the release at
 /// the chi-square 99.99 % quantile hexa motor 5 3.1, elevator 8.8, aileron 0.0; followed
-/// again after a release when the fit is where it was, hexa motor 5 1.3. The bounds
+/// again after a release when the fit is where it was, hexa motor 5 1.3; held between clear
+/// fits, quad motor 4 0.0, hexa motor 5 1.1. The bounds
 /// leave room for a seed's split to move (the runs are seeded, but another machine's floating
 /// point may move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a
 /// mean over 10), and those of the tail, hexa motor 5 and the aileron are below what came
@@ -727,7 +728,7 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
         ("quad-x-motor2-loe", 2.0),
         ("hexa-x-motor3-loe", 5.0),
         ("plane-elevator-loe", 20.0),
-        ("quad-x-motor4-bias", 5.0),
+        ("quad-x-motor4-bias", 1.0),
         ("hexa-x-motor5-stuck", 6.0),
         ("heli-swash2-loe", 8.0),
         ("heli-tail-bias", 2.0),

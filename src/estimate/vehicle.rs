@@ -595,7 +595,6 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         self.esmf.schedule.restart();
     }
     fn set_fault_in_force(&mut self, in_force: bool) {
-        // Held for one update after each reseat only (`hold_class`).
         self.ukf.ukf.consider = [false; N];
         self.ukf.set_fault_in_force(in_force);
         self.decided_this_step = false;
@@ -620,6 +619,17 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         }
         if !in_force {
             self.following = [Following::Idle; MAX_ACTUATORS];
+        }
+        // While followed, the updates leave a decided actuator's gain and bias at the last
+        // clear fit too (`hold_class`): on a hovering motor the data tell a gain from an offset
+        // only now and then, and between those fits the filter's updates moved the gain of
+        // the quad's motor 4 offset to 1.056, its bounds excluding 1 (seeds 11-40, steps off:
+        // motor 4 3.8 -> 3.4 %, hexa motor 5 3.2 -> 2.4 %, swash 2 1.1 -> 0.0 %, aileron 8.7 ->
+        // 7.7 %; decisions the same; the SITL quad hover log clears 0.4 s earlier).
+        let l = (N - 3) / 2;
+        for k in (0..l).filter(|&k| now && matches!(self.following[k], Following::Kind(_))) {
+            self.ukf.ukf.consider[3 + k] = true;
+            self.ukf.ukf.consider[3 + l + k] = true;
         }
         self.was_identifying = now;
     }
@@ -647,11 +657,12 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         }
         self.following[j] = Following::Kind(c.kind);
         self.last_fit[j] = Some(c);
-        // The next update leaves them at the identification (consider states): the filter,
-        // taking the gusts for white noise, weighs one sample as if it were independent of
-        // those the fit has already weighed with their colour, and moved the aileron's gain,
-        // reseated at 1, by up to 0.15 in that one step (off by more than 0.05 after onset +
-        // 5 s on 33.3 % of the steps, seeds 1-10; so left, 3.7 %). With no gusts, 0 %.
+        // The updates leave them at the identification (consider states; on every step while
+        // followed: `set_fault_in_force`): the filter, taking the gusts for white noise, weighs
+        // each sample as if it were independent of those the fit has already weighed with
+        // their colour, and moved the aileron's gain, reseated at 1, by up to 0.15 in the one
+        // step after a reseat (off by more than 0.05 after onset + 5 s on 33.3 % of the steps,
+        // seeds 1-10; so left, 3.7 %). With no gusts, 0 %.
         let entries = [
             (3 + j, c.gamma, c.gamma_std * c.gamma_std),
             (3 + l + j, c.delta, c.delta_std * c.delta_std),
@@ -740,7 +751,7 @@ mod tests {
         let ahc = 3..11;
         let at = |t: f64, when: f64| (t - when).abs() < dt / 2.0;
         let (mut raised, mut transitions) = (false, 0);
-        let mut released_at = None;
+        let (mut released_at, mut released_before_recovery) = (None, 0);
         let mut awaited = Vec::new();
         let loss = |gamma| Identified {
             kind: IdentifiedKind::Gain,
@@ -820,8 +831,8 @@ mod tests {
                         assert_eq!(pair.ukf.ukf.x, x_before, "another kind");
                         pair.hold_class(1, Some(loss(0.53)));
                         assert_eq!(pair.ukf.ukf.x[4], 0.53);
-                        pair.hold_class(1, Some(loss(0.6)));
-                        assert_eq!(pair.ukf.ukf.x[4], 0.6, "followed again");
+                        pair.hold_class(1, Some(loss(0.51)));
+                        assert_eq!(pair.ukf.ukf.x[4], 0.51, "followed again");
                     }
                     _ => {}
                 }
@@ -834,6 +845,9 @@ mod tests {
             let free = [0.0..13.4, 20.0..22.9, 23.5..24.0];
             if free.iter().any(|r| r.contains(&s.t)) {
                 assert!(!pair.ukf.identifying(), "t = {}", s.t);
+            }
+            if s.t < 40.0 {
+                released_before_recovery = pair.ukf.releases;
             }
             if s.t >= 40.0 && released_at.is_none() && pair.ukf.releases > 0 {
                 released_at = Some(s.t);
@@ -850,7 +864,8 @@ mod tests {
         assert_eq!(awaited, [true, true, true, true]);
         let at = released_at.expect("the recovery did not release the hold");
         assert!(at < 41.0, "released at {at} s");
-        assert_eq!(pair.ukf.releases, 1, "released before the recovery too");
+        // (Fed a fit of the fault after its end, the fourth hold is released again.)
+        assert_eq!(released_before_recovery, 0, "released before the recovery");
     }
 
     /// Which actuators wait for the diagnosis' fit or follow it: those decided in the step that
@@ -942,7 +957,12 @@ mod tests {
         // The variance as predicted (the gain is constant in the model), not updated.
         assert!((pair.ukf.ukf.p[(4, 4)] - (held[(4, 4)] + q[4])).abs() < 1e-15);
         assert!(moved.iter().any(|d| *d != 0.0), "the other states update");
-        // Only the update that follows the reseat: without one, the data move it again.
+        // Held while followed, also on steps without a clear fit; after a release the data
+        // move them again.
+        pair.set_fault_in_force(true);
+        let moved = step(&mut pair);
+        assert!(moved[4] == 0.0 && moved[8] == 0.0, "{moved}");
+        pair.ukf.restart_identification();
         pair.set_fault_in_force(true);
         let moved = step(&mut pair);
         assert!(moved[4] != 0.0 && moved[8] != 0.0, "{moved}");
