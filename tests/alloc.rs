@@ -220,6 +220,7 @@ fn vehicle_filter_steps_allocate_nothing() {
                         gamma_std: 0.01,
                         delta: 0.0,
                         delta_std: 0.013,
+                        tolerance: 0.15,
                     }),
                 );
             }

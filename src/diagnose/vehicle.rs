@@ -1056,12 +1056,18 @@ impl Diagnoser {
             ),
             _ => return None,
         };
+        // A gain's class tolerance, or an offset's (a stuck output's value too).
+        let tolerance = match kind {
+            IdentifiedKind::Gain => p.loe_tau,
+            _ => p.bias_tau,
+        };
         Some(Identified {
             kind,
             gamma: gamma.0,
             gamma_std: gamma.1,
             delta: delta.0,
             delta_std: delta.1,
+            tolerance,
         })
     }
 

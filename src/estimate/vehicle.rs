@@ -121,8 +121,8 @@ pub trait VehicleFilters: Send {
     /// its last fit: [`Self::forget`]). After a release (the innovations say a further change: the
     /// fault grew or went away, or a strong gust) the fit is followed again, once the
     /// identification resumes, only when it names the kind followed with the changed
-    /// coefficient within 3σ of the last fit (of the two fits' spreads): a gust leaves the
-    /// fit where it was, a fault's end moves it.
+    /// coefficient within the class's tolerance of the last fit (or 3σ of the two fits'
+    /// spreads, if wider): a gust leaves the fit about where it was, a fault's end moves it.
     fn hold_class(&mut self, j: usize, identified: Option<Identified>);
     /// Whether [`Self::hold_class`] is asked for actuator `j` now (the MIT-UKF identifies after
     /// a decision on it, and no clearing or further decision has ended that since, nor a
@@ -148,6 +148,10 @@ pub struct Identified {
     pub gamma_std: f64,
     pub delta: f64,
     pub delta_std: f64,
+    /// How far the changed coefficient may move and still read as this fault: the class's
+    /// tolerance (what tells it from a healthy actuator). After a release the fit is followed
+    /// again only within it of the last fit ([`VehicleFilters::hold_class`]).
+    pub tolerance: f64,
 }
 
 /// What changed, as the diagnosis identifies it: the gain (a loss), the offset (a bias) or both
@@ -646,10 +650,16 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         if let Following::Released(k) = self.following[j] {
             let consistent = self.last_fit[j].is_some_and(|last| {
                 let (now, then) = match k {
-                    IdentifiedKind::Gain => ((c.gamma, c.gamma_std), (last.gamma, last.gamma_std)),
-                    _ => ((c.delta, c.delta_std), (last.delta, last.delta_std)),
+                    IdentifiedKind::Gain => (
+                        (c.gamma, c.gamma_std),
+                        (last.gamma, last.gamma_std, last.tolerance),
+                    ),
+                    _ => (
+                        (c.delta, c.delta_std),
+                        (last.delta, last.delta_std, last.tolerance),
+                    ),
                 };
-                (now.0 - then.0).abs() <= 3.0 * now.1.hypot(then.1)
+                (now.0 - then.0).abs() <= (3.0 * now.1.hypot(then.1)).max(then.2)
             });
             if k != c.kind || !consistent {
                 return;
@@ -759,6 +769,7 @@ mod tests {
             gamma_std: 0.01,
             delta: 0.0,
             delta_std: 0.02,
+            tolerance: 0.15,
         };
         for _ in 0..(45.0 / dt) as usize {
             let s = sim.step();
@@ -811,6 +822,7 @@ mod tests {
                             gamma_std: 0.03,
                             delta: -0.2,
                             delta_std: 0.01,
+                            tolerance: 0.0,
                         };
                         pair.hold_class(1, Some(offset));
                         assert_eq!((pair.ukf.ukf.x[4], pair.ukf.ukf.x[8]), (0.57, 0.0));
@@ -818,10 +830,13 @@ mod tests {
                         assert_eq!(pair.ukf.ukf.x[4], 0.56);
                     }
                     // After the release: the fault is still in force, and the data's fit is
-                    // followed again once its gain is where the last fit had it (0.5 ± 0.01,
-                    // within 3σ of the two), not before (as after the fault's end).
+                    // followed again once its gain is where the last fit had it (0.5 ± 0.01:
+                    // within the class tolerance, 0.15, or 3σ of the two if wider), not
+                    // before (as after the fault's end).
                     4 => {
                         pair.hold_class(1, Some(loss(0.95)));
+                        assert_eq!(pair.ukf.ukf.x, x_before);
+                        pair.hold_class(1, Some(loss(0.66)));
                         assert_eq!(pair.ukf.ukf.x, x_before);
                         let offset = Identified {
                             kind: IdentifiedKind::Offset,
@@ -829,8 +844,8 @@ mod tests {
                         };
                         pair.hold_class(1, Some(offset));
                         assert_eq!(pair.ukf.ukf.x, x_before, "another kind");
-                        pair.hold_class(1, Some(loss(0.53)));
-                        assert_eq!(pair.ukf.ukf.x[4], 0.53);
+                        pair.hold_class(1, Some(loss(0.62)));
+                        assert_eq!(pair.ukf.ukf.x[4], 0.62);
                         pair.hold_class(1, Some(loss(0.51)));
                         assert_eq!(pair.ukf.ukf.x[4], 0.51, "followed again");
                     }
@@ -895,6 +910,7 @@ mod tests {
             gamma_std: 0.05,
             delta: -0.15,
             delta_std: 0.01,
+            tolerance: 0.0,
         };
         pair.hold_class(0, Some(offset));
         assert_eq!(pair.ukf.ukf.x[7], -0.15);
@@ -949,6 +965,7 @@ mod tests {
             gamma_std: 0.01,
             delta: 0.02,
             delta_std: 0.02,
+            tolerance: 0.0,
         };
         pair.hold_class(1, Some(loss));
         let (held, q) = (pair.ukf.ukf.p, pair.ukf.ukf.process_noise);
@@ -986,6 +1003,7 @@ mod tests {
             gamma_std: 0.01,
             delta: 0.0,
             delta_std: 0.013,
+            tolerance: 0.0,
         };
         pair.hold_class(0, Some(loss));
         // The gusts move it, then the innovations release the identification (motor 2's
