@@ -728,7 +728,7 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
         ("quad-x-motor2-loe", 2.0),
         ("hexa-x-motor3-loe", 5.0),
         ("plane-elevator-loe", 20.0),
-        ("quad-x-motor4-bias", 1.0),
+        ("quad-x-motor4-bias", 3.0),
         ("hexa-x-motor5-stuck", 6.0),
         ("heli-swash2-loe", 8.0),
         ("heli-tail-bias", 2.0),
