@@ -894,20 +894,26 @@ mod tests {
         assert_eq!(released_before_recovery, 0, "released before the recovery");
     }
 
+    /// A quad-X filter pair (n = 11, with a_z) at 50 Hz.
+    fn quad_pair() -> FilterPair<11, 4, 23> {
+        let profile = Profile::resolve("quad-x").unwrap();
+        FilterPair::new(FilterSetup::from_profile(&profile, 0.02).unwrap())
+    }
+
+    /// A fault in force until the MIT-UKF identifies (`IDENTIFY_AFTER_S` at 50 Hz).
+    fn identify(pair: &mut FilterPair<11, 4, 23>) {
+        for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
+            pair.set_fault_in_force(true);
+        }
+        assert!(pair.ukf.identifying());
+    }
+
     /// Which actuators wait for the diagnosis' fit or follow it: those decided in the step that
     /// started the identification, all of them, and none decided before a further decision,
     /// cleared, or before the MIT-UKF was reset.
     #[test]
     fn a_further_decision_ends_the_wait_of_the_earlier_ones() {
-        let profile = Profile::resolve("quad-x").unwrap();
-        let mut pair =
-            FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, 0.02).unwrap());
-        let identify = |pair: &mut FilterPair<11, 4, 23>| {
-            for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
-                pair.set_fault_in_force(true);
-            }
-            assert!(pair.ukf.identifying());
-        };
+        let mut pair = quad_pair();
         let waiting = |pair: &FilterPair<11, 4, 23>| -> Vec<usize> {
             (0..4).filter(|&j| pair.awaits_identification(j)).collect()
         };
@@ -998,14 +1004,7 @@ mod tests {
 
     #[test]
     fn a_decision_on_another_actuator_keeps_an_earlier_identification() {
-        let profile = Profile::resolve("quad-x").unwrap();
-        let mut pair =
-            FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, 0.02).unwrap());
-        let identify = |pair: &mut FilterPair<11, 4, 23>| {
-            for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
-                pair.set_fault_in_force(true);
-            }
-        };
+        let mut pair = quad_pair();
         pair.forget(0);
         identify(&mut pair);
         let loss = Identified {
