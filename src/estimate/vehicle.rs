@@ -390,6 +390,19 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
         }
     }
 
+    /// The MIT-UKF's next update leaves the entries actuator `k`'s last fit reseats (those
+    /// `reseat_entries` takes) as they are.
+    fn consider_last_fit(&mut self, k: usize) {
+        let l = (N - 3) / 2;
+        let Some(c) = self.last_fit[k] else { return };
+        for e in fit_entries(k, l, &c)
+            .iter()
+            .filter(|e| super::ukf::reseatable::<N>(e))
+        {
+            self.ukf.ukf.consider[e.0] = true;
+        }
+    }
+
     fn new_ukf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitUkf<RateModel<N, M>, N, M, S> {
         // chi-square 99.9 % quantile with M degrees of freedom (3 or 4 measurements).
         let clip = if M == 4 { 18.47 } else { 16.27 };
@@ -639,14 +652,9 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // motor 4 3.8 -> 3.4 %, hexa motor 5 3.2 -> 2.4 %, swash 2 1.1 -> 0.0 %, aileron 8.7 ->
         // 7.7 %; decisions the same; the SITL quad hover log clears 0.4 s earlier).
         let l = (N - 3) / 2;
-        for k in (0..l).filter(|&k| now && matches!(self.following[k], Following::Kind(_))) {
-            // The entries the fit reseated (those `reseat_entries` takes).
-            let Some(c) = self.last_fit[k] else { continue };
-            for e in fit_entries(k, l, &c)
-                .iter()
-                .filter(|e| super::ukf::reseatable::<N>(e))
-            {
-                self.ukf.ukf.consider[e.0] = true;
+        for k in 0..l {
+            if now && matches!(self.following[k], Following::Kind(_)) {
+                self.consider_last_fit(k);
             }
         }
         self.was_identifying = now;
@@ -680,17 +688,14 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         }
         self.following[j] = Following::Kind(c.kind);
         self.last_fit[j] = Some(c);
+        self.consider_last_fit(j);
         // The updates leave them at the identification (consider states; on every step while
         // followed: `set_fault_in_force`): the filter, taking the gusts for white noise, weighs
         // each sample as if it were independent of those the fit has already weighed with
         // their colour, and moved the aileron's gain, reseated at 1, by up to 0.15 in the one
         // step after a reseat (off by more than 0.05 after onset + 5 s on 33.3 % of the steps,
         // seeds 1-10; so left, 3.7 %). With no gusts, 0 %.
-        let entries = fit_entries(j, l, &c);
-        for e in entries.iter().filter(|e| super::ukf::reseatable::<N>(e)) {
-            self.ukf.ukf.consider[e.0] = true;
-        }
-        self.ukf.reseat_entries(&entries);
+        self.ukf.reseat_entries(&fit_entries(j, l, &c));
     }
     fn recovered(&mut self, j: usize) {
         let l = self.actuators();
