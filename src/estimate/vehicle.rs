@@ -1073,6 +1073,49 @@ mod tests {
         assert!(!pair.ukf.keep_capped.iter().any(|c| *c));
     }
 
+    /// A release while an actuator is already released (its fit not followed since the first)
+    /// does not renew it: the last fit is the one the data stopped agreeing with at the first
+    /// release, more than `IDENTIFY_AFTER_S` before the second. A decision on another actuator
+    /// just after the second leaves it to the filter (just after the first it is kept: see
+    /// `a_decision_on_another_actuator_keeps_an_earlier_identification`).
+    #[test]
+    fn a_second_release_does_not_renew_an_earlier_one() {
+        let loss = Identified {
+            kind: IdentifiedKind::Gain,
+            gamma: 0.6,
+            gamma_std: 0.01,
+            delta: 0.0,
+            delta_std: 0.013,
+            tolerance: 0.15,
+        };
+        let release = |pair: &mut FilterPair<11, 4, 23>| {
+            pair.ukf.restart_identification();
+            pair.set_fault_in_force(true);
+            assert!(!pair.ukf.identifying());
+        };
+        let mut pair = quad_pair();
+        pair.forget(0);
+        identify(&mut pair);
+        pair.hold_class(0, Some(loss));
+        release(&mut pair);
+        // Identifying again, 3 s later: a fit far from the last is not resumed; released again.
+        identify(&mut pair);
+        pair.hold_class(
+            0,
+            Some(Identified {
+                gamma: 0.95,
+                ..loss
+            }),
+        );
+        assert_ne!(pair.ukf.ukf.x[3], 0.95, "resumed");
+        assert!(pair.awaits_identification(0));
+        release(&mut pair);
+        (pair.ukf.ukf.x[3], pair.ukf.ukf.x[7]) = (0.8, 0.05);
+        pair.forget(2);
+        assert_eq!((pair.ukf.ukf.x[3], pair.ukf.ukf.x[7]), (0.8, 0.05));
+        assert!(!pair.ukf.keep_capped.iter().any(|c| *c));
+    }
+
     #[test]
     #[allow(clippy::needless_range_loop)] // actuator j indexes the effects and the state
     fn the_healthy_residual_of_an_offset_is_its_weighted_effect_unweighted() {
