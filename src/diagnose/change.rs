@@ -267,6 +267,37 @@ impl ChangeTest {
     /// with `healthy` (nothing under way) the residual's colour learns from it too.
     /// A non-finite value breaks the record: what came before is dropped.
     pub fn push(&mut self, t: f64, residual: &[f64; 4], u: &[f64], healthy: bool) {
+        let learn = if healthy { Learn::Raw } else { Learn::No };
+        self.store(t, residual, u, learn);
+    }
+
+    /// [`Self::push`] during a fault identified from the data as actuator `j`'s gain `gamma`
+    /// and offset `delta` (a stuck output: gain 0, offset its value): the colour learns from
+    /// the residual with that fault taken out, which is the healthy residual if the
+    /// identification is right.
+    pub fn push_identified(
+        &mut self,
+        t: f64,
+        residual: &[f64; 4],
+        u: &[f64],
+        j: usize,
+        gamma: f64,
+        delta: f64,
+    ) {
+        let learn =
+            if j < self.effects.len() && j < u.len() && gamma.is_finite() && delta.is_finite() {
+                Learn::Without {
+                    actuator: j,
+                    gain_change: gamma - 1.0,
+                    offset: delta,
+                }
+            } else {
+                Learn::No
+            };
+        self.store(t, residual, u, learn);
+    }
+
+    fn store(&mut self, t: f64, residual: &[f64; 4], u: &[f64], learn: Learn) {
         let l = self.effects.len().min(u.len());
         let finite = residual[..self.rows].iter().all(|v| v.is_finite())
             && u[..l].iter().all(|v| v.is_finite())
@@ -289,10 +320,22 @@ impl ChangeTest {
             *r = x * w;
         }
         e.u[..l].copy_from_slice(&u[..l]);
-        if healthy {
-            self.colour.learn(&e.r, self.rows);
-        } else {
-            self.colour.break_history();
+        match learn {
+            Learn::Raw => self.colour.learn(&e.r, self.rows),
+            Learn::Without {
+                actuator,
+                gain_change,
+                offset,
+            } => {
+                let b = &self.effects[actuator];
+                let s = gain_change * e.u[actuator] + offset;
+                let mut r = e.r;
+                for (ri, bi) in r.iter_mut().zip(b).take(self.rows) {
+                    *ri -= bi * s;
+                }
+                self.colour.learn(&r, self.rows);
+            }
+            Learn::No => self.colour.break_history(),
         }
         let cap = self.buf.len();
         self.buf[self.head] = e;
@@ -731,6 +774,22 @@ pub struct KindFit {
     /// cannot be told apart).
     pub pair_gamma: f64,
     pub pair_gamma_std: f64,
+}
+
+/// What the residual's colour learns from a stored sample.
+#[derive(Debug, Clone, Copy)]
+enum Learn {
+    /// Nothing (a change under way): the lags start again after it.
+    No,
+    /// The residual as it is (healthy).
+    Raw,
+    /// The residual less an identified change of one actuator's output,
+    /// `gain_change · u + offset` (weighted effect per unit of output).
+    Without {
+        actuator: usize,
+        gain_change: f64,
+        offset: f64,
+    },
 }
 
 /// The most samples a [`ChangeTest`] keeps.
@@ -1200,6 +1259,58 @@ mod tests {
                 r
             })
             .collect()
+    }
+
+    /// During an identified change the colour learns from the residual with the change taken
+    /// out: with the right identification, exactly what it would have learned from the noise
+    /// alone; with a wrong one, something else; with none, nothing (the lags restart).
+    #[test]
+    fn the_colour_learns_on_through_an_identified_change() {
+        let mut rng = Rng::new(11);
+        let (healthy, steps) = (300, 1500);
+        let noise = coloured(&mut rng, steps, 0.98, 0.1, 0.03);
+        let u: Vec<[f64; 3]> = (0..steps)
+            .map(|k| [0.5, 0.5 + 0.3 * (0.05 * k as f64).sin(), 0.5])
+            .collect();
+        let (gamma, delta) = (0.6, 0.03);
+        let fed = |identified: Option<(f64, f64)>| {
+            let mut test = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
+            for (k, (n, u)) in noise.iter().zip(&u).enumerate() {
+                let t = k as f64 * 0.02;
+                if k < healthy {
+                    test.push(t, n, u, true);
+                    continue;
+                }
+                // Actuator 1's output is gamma u + delta from here on.
+                let s = (gamma - 1.0) * u[1] + delta;
+                let b = effects()[1];
+                let r: [f64; 4] = std::array::from_fn(|i| n[i] + b[i] * s);
+                match identified {
+                    Some((g, d)) => test.push_identified(t, &r, u, 1, g, d),
+                    None => test.push(t, &r, u, false),
+                }
+            }
+            test.colour
+        };
+        let mut reference = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
+        for (k, (n, u)) in noise.iter().zip(&u).enumerate() {
+            reference.push(k as f64 * 0.02, n, u, true);
+        }
+        let reference = reference.colour;
+        let right = fed(Some((gamma, delta)));
+        assert_eq!(right.learned, reference.learned);
+        for (a, b) in right
+            .cov
+            .iter()
+            .flatten()
+            .zip(reference.cov.iter().flatten())
+        {
+            assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-6), "{a} vs {b}");
+        }
+        let wrong = fed(Some((1.0, 0.0)));
+        assert!((wrong.cov[1][3] - reference.cov[1][3]).abs() > 0.1 * reference.cov[1][3].abs());
+        let none = fed(None);
+        assert_eq!(none.learned, healthy - 3);
     }
 
     #[test]
