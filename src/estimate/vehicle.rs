@@ -913,6 +913,18 @@ mod tests {
         assert!(pair.ukf.identifying());
     }
 
+    /// A loss identified at `gamma` (spread 0.01, delta 0 ± 0.013) with this class tolerance.
+    fn loss_at(gamma: f64, tolerance: f64) -> Identified {
+        Identified {
+            kind: IdentifiedKind::Gain,
+            gamma,
+            gamma_std: 0.01,
+            delta: 0.0,
+            delta_std: 0.013,
+            tolerance,
+        }
+    }
+
     /// Which actuators wait for the diagnosis' fit or follow it: those decided in the step that
     /// started the identification, all of them, and none decided before a further decision,
     /// cleared, or before the MIT-UKF was reset.
@@ -1012,14 +1024,7 @@ mod tests {
         let mut pair = quad_pair();
         pair.forget(0);
         identify(&mut pair);
-        let loss = Identified {
-            kind: IdentifiedKind::Gain,
-            gamma: 0.6,
-            gamma_std: 0.01,
-            delta: 0.0,
-            delta_std: 0.013,
-            tolerance: 0.0,
-        };
+        let loss = loss_at(0.6, 0.0);
         pair.hold_class(0, Some(loss));
         // The gusts move it, then the innovations release the identification (motor 2's
         // change, not yet decided).
@@ -1080,14 +1085,7 @@ mod tests {
     /// `a_decision_on_another_actuator_keeps_an_earlier_identification`).
     #[test]
     fn a_second_release_does_not_renew_an_earlier_one() {
-        let loss = Identified {
-            kind: IdentifiedKind::Gain,
-            gamma: 0.6,
-            gamma_std: 0.01,
-            delta: 0.0,
-            delta_std: 0.013,
-            tolerance: 0.15,
-        };
+        let loss = loss_at(0.6, 0.15);
         let release = |pair: &mut FilterPair<11, 4, 23>| {
             pair.ukf.restart_identification();
             pair.set_fault_in_force(true);
@@ -1100,13 +1098,7 @@ mod tests {
         release(&mut pair);
         // Identifying again, 3 s later: a fit far from the last is not resumed; released again.
         identify(&mut pair);
-        pair.hold_class(
-            0,
-            Some(Identified {
-                gamma: 0.95,
-                ..loss
-            }),
-        );
+        pair.hold_class(0, Some(loss_at(0.95, 0.15)));
         assert_ne!(pair.ukf.ukf.x[3], 0.95, "resumed");
         assert!(pair.awaits_identification(0));
         release(&mut pair);
