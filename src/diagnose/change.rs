@@ -20,7 +20,9 @@
 //! command pattern and in a_z, which the fit weighs).
 //!
 //! The residual is coloured (wind, slow model error), which the plain search weighs like
-//! independent samples. Once that colour is learned on healthy stretches,
+//! independent samples. Once that colour is learned on healthy stretches (and learned on
+//! during a fault, from the residual with the fault's identification taken out:
+//! [`ChangeTest::push_identified`]),
 //! [`ChangeTest::whitened_search`] runs the same search on the whitened residual (generalised
 //! least squares), and [`ChangeTest::whitened_gain_or_offset`] compares one actuator's gain
 //! with its offset there.
@@ -205,9 +207,11 @@ pub struct ChangeTest {
     buf: Vec<Entry>,
     head: usize,
     len: usize,
+    /// Samples stored since the test was made (a clock for stretches that outlive the store).
+    stored: u64,
     /// The shortest changed stretch considered (samples).
     min_samples: usize,
-    /// The residual's colour, learned on healthy stretches (see [`Colour`]).
+    /// The residual's colour, learned on healthy stretches and on identified faults (see [`Colour`]).
     colour: Colour,
     /// Per stored sample, the whitened series of [`ChangeTest::whitened_search`].
     scratch: Vec<SearchScratch>,
@@ -228,8 +232,8 @@ impl ChangeTest {
     /// `effects[j]`: actuator j's weighted effect per unit of effective output, `weights`: the
     /// inverse noise std of each measurement row (`rows` of them: 3, or 4 with a_z),
     /// `capacity`: samples kept (at most [`MAX_STORE`]), `min_samples`: the shortest stretch a
-    /// change is fitted on, `colour_memory`: the healthy samples the residual's colour is
-    /// averaged over (it is used once a store's worth, `capacity`, has been learned).
+    /// change is fitted on, `colour_memory`: the healthy samples (or those with an identified
+    /// fault taken out) the residual's colour is averaged over (it is used once a store's worth, `capacity`, has been learned).
     pub fn new(
         effects: Vec<[f64; 4]>,
         weights: [f64; 4],
@@ -253,6 +257,7 @@ impl ChangeTest {
             ],
             head: 0,
             len: 0,
+            stored: 0,
             min_samples: min_samples.max(2),
             colour: Colour {
                 memory: colour_memory.max(1),
@@ -341,6 +346,7 @@ impl ChangeTest {
         self.buf[self.head] = e;
         self.head = (self.head + 1) % cap;
         self.len = (self.len + 1).min(cap);
+        self.stored += 1;
     }
 
     /// Forget the stored residuals (a gap in the telemetry, a restart).
@@ -352,6 +358,16 @@ impl ChangeTest {
     /// Whether the residual's colour has been learned (the test whitens with it).
     pub fn colour_learned(&self) -> bool {
         self.colour.learned >= self.colour.needed
+    }
+
+    /// Samples stored so far (all of them, not only those kept).
+    pub fn stored(&self) -> u64 {
+        self.stored
+    }
+
+    /// The most samples kept.
+    pub fn capacity(&self) -> usize {
+        self.buf.len()
     }
 
     pub fn len(&self) -> usize {
@@ -875,7 +891,7 @@ struct Colour {
     mean: [f64; 4],
     /// Autocovariances at lags 0..=3 per row.
     cov: [[f64; 4]; 4],
-    /// The previous three residuals (newest first) while consecutive and healthy.
+    /// The previous three residuals (newest first) while consecutive and learned from.
     history: [[f64; 4]; 3],
     history_len: usize,
     /// Samples learned, the averaging memory, and how many make the colour usable.
@@ -1262,29 +1278,32 @@ mod tests {
     }
 
     /// During an identified change the colour learns from the residual with the change taken
-    /// out: with the right identification, exactly what it would have learned from the noise
-    /// alone; with a wrong one, something else; with none, nothing (the lags restart).
+    /// out: with the right identification (a loss and an offset, or a stuck output), exactly
+    /// what it would have learned from the noise alone, in the weighted residual's units; with
+    /// a wrong one, something else; with none, nothing (the lags restart).
     #[test]
     fn the_colour_learns_on_through_an_identified_change() {
         let mut rng = Rng::new(11);
         let (healthy, steps) = (300, 1500);
+        let weights = [2.0, 0.5, 4.0, 1.0];
+        // The noise in weighted units; the residual pushed is unweighted.
         let noise = coloured(&mut rng, steps, 0.98, 0.1, 0.03);
+        let unweighted = |r: &[f64; 4]| -> [f64; 4] { std::array::from_fn(|i| r[i] / weights[i]) };
         let u: Vec<[f64; 3]> = (0..steps)
             .map(|k| [0.5, 0.5 + 0.3 * (0.05 * k as f64).sin(), 0.5])
             .collect();
-        let (gamma, delta) = (0.6, 0.03);
-        let fed = |identified: Option<(f64, f64)>| {
-            let mut test = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
+        // Actuator 1's output from `healthy` on: gamma u + delta.
+        let fed = |(gamma, delta): (f64, f64), identified: Option<(f64, f64)>| {
+            let mut test = ChangeTest::new(effects(), weights, 3, 300, 10, 3000);
             for (k, (n, u)) in noise.iter().zip(&u).enumerate() {
                 let t = k as f64 * 0.02;
                 if k < healthy {
-                    test.push(t, n, u, true);
+                    test.push(t, &unweighted(n), u, true);
                     continue;
                 }
-                // Actuator 1's output is gamma u + delta from here on.
                 let s = (gamma - 1.0) * u[1] + delta;
                 let b = effects()[1];
-                let r: [f64; 4] = std::array::from_fn(|i| n[i] + b[i] * s);
+                let r = unweighted(&std::array::from_fn(|i| n[i] + b[i] * s));
                 match identified {
                     Some((g, d)) => test.push_identified(t, &r, u, 1, g, d),
                     None => test.push(t, &r, u, false),
@@ -1292,24 +1311,30 @@ mod tests {
             }
             test.colour
         };
-        let mut reference = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
+        let mut reference = ChangeTest::new(effects(), weights, 3, 300, 10, 3000);
         for (k, (n, u)) in noise.iter().zip(&u).enumerate() {
-            reference.push(k as f64 * 0.02, n, u, true);
+            reference.push(k as f64 * 0.02, &unweighted(n), u, true);
         }
         let reference = reference.colour;
-        let right = fed(Some((gamma, delta)));
-        assert_eq!(right.learned, reference.learned);
-        for (a, b) in right
-            .cov
-            .iter()
-            .flatten()
-            .zip(reference.cov.iter().flatten())
-        {
-            assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-6), "{a} vs {b}");
+        // A loss with an offset, and an output stuck at 0.4 (gain 0, offset its value).
+        for fault in [(0.6, 0.03), (0.0, 0.4)] {
+            let right = fed(fault, Some(fault));
+            assert_eq!(right.learned, reference.learned);
+            for (a, b) in right
+                .cov
+                .iter()
+                .flatten()
+                .zip(reference.cov.iter().flatten())
+            {
+                assert!(
+                    (a - b).abs() <= 1e-9 * b.abs().max(1e-6),
+                    "{fault:?}: {a} vs {b}"
+                );
+            }
         }
-        let wrong = fed(Some((1.0, 0.0)));
+        let wrong = fed((0.6, 0.03), Some((0.8, 0.03)));
         assert!((wrong.cov[1][3] - reference.cov[1][3]).abs() > 0.1 * reference.cov[1][3].abs());
-        let none = fed(None);
+        let none = fed((0.6, 0.03), None);
         assert_eq!(none.learned, healthy - 3);
     }
 
