@@ -716,8 +716,8 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// the chi-square 99.99 % quantile hexa motor 5 3.1, elevator 8.8, aileron 0.0; followed
 /// again after a release when the fit is where it was, hexa motor 5 1.3; held between clear
 /// fits, quad motor 4 0.0, hexa motor 5 1.1; with the gusts' colour learned on through the
-/// fault (`ChangeTest::push_identified`) elevator 4.7; with the fits of the stretches since
-/// the decision pooled (`FitBank`) elevator 1.8, aileron 1.6. The bounds
+/// fault (`ChangeTest::push_identified`) elevator 4.7; with the fits on earlier stores of the
+/// fault pooled (`FitBank`) elevator 2.9, aileron 2.6. The bounds
 /// leave room for a seed's split to move (the runs are seeded, but another machine's floating
 /// point may move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a
 /// mean over 10), and those of the tail, hexa motor 5 and the aileron are below what came

@@ -365,6 +365,11 @@ impl ChangeTest {
         self.stored
     }
 
+    /// The shortest stretch fitted.
+    pub fn min_samples(&self) -> usize {
+        self.min_samples
+    }
+
     /// The most samples kept.
     pub fn capacity(&self) -> usize {
         self.buf.len()
@@ -521,6 +526,21 @@ impl ChangeTest {
     /// the command's sample-to-sample moves, where a gain and an offset differ, weigh in full.
     /// No allocation.
     pub fn whitened_gain_or_offset(&self, j: usize, samples: usize) -> Option<KindFit> {
+        self.whitened_gain_or_offset_within(j, samples, samples)
+    }
+
+    /// [`Self::whitened_gain_or_offset`] of a change `changed` samples old (at most the
+    /// store), fitted on the newest `samples` of them only: the regressors start at the
+    /// change, so that the fit on a later part of a change is not pulled towards healthy by
+    /// the whitening (which, running from the store's start, has partly predicted the change
+    /// away by then; tested), and fits on disjoint parts of one change pool (their sums are
+    /// those of the fit on all of them, split).
+    pub fn whitened_gain_or_offset_within(
+        &self,
+        j: usize,
+        changed: usize,
+        samples: usize,
+    ) -> Option<KindFit> {
         if !self.colour_learned() || j >= self.effects.len() {
             return None;
         }
@@ -532,10 +552,11 @@ impl ChangeTest {
         let w = self.colour.whitening(rows);
         let b = &self.effects[j];
         // Oldest of the stretch first: the residual's filter runs over the whole store (its
-        // state at the stretch's start is the healthy past's), each regressor's from zero at
-        // the stretch's start (zero before it), all with the same gains.
+        // state at the change is the healthy past's), each regressor's from zero at the
+        // change (zero before it), all with the same gains; the sums over the stretch.
         let entry = |k: usize| &self.buf[(self.head + cap - self.len + k) % cap];
         let start = self.len - n;
+        let change_start = self.len - changed.clamp(n, self.len);
         let (mut pr, mut pg, mut po) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
         let mut pv = [0.0f64; 4];
         for (p, wi) in pv.iter_mut().zip(&w) {
@@ -554,11 +575,14 @@ impl ChangeTest {
                 let (gain, scale, next) = wi.advance(pv[i]);
                 pv[i] = next;
                 let y = wi.apply(&mut pr[i], e.r[i], gain, scale);
-                if !inside {
+                if k < change_start {
                     continue;
                 }
                 let g = wi.apply(&mut pg[i], b[i] * u, gain, scale);
                 let o = wi.apply(&mut po[i], b[i], gain, scale);
+                if !inside {
+                    continue;
+                }
                 gy += g * y;
                 gx += g * g;
                 oy += o * y;
@@ -1397,6 +1421,45 @@ mod tests {
             test.push(t, &r, &u, k < 1400);
         }
         test
+    }
+
+    /// A loss older than the store, fitted on the store's newest part: with the regressors from
+    /// the change (the store's start) the fit is the loss (to the little noise in the store);
+    /// with the regressors
+    /// from the part's start, the whitening has partly predicted the loss away and the fit is
+    /// pulled towards healthy.
+    #[test]
+    fn a_later_part_of_a_change_fits_it_with_the_regressors_from_the_change() {
+        let mut rng = Rng::new(5);
+        let mut test = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
+        let u = |k: usize| [0.5 + 0.2 * (0.07 * k as f64).sin(), 0.5, 0.5];
+        for (k, r) in coloured(&mut rng, 1000, 0.98, 0.1, 0.02).iter().enumerate() {
+            test.push(k as f64 * 0.02, r, &u(k), true);
+        }
+        assert!(test.colour_learned());
+        let (gamma, b) = (0.5, effects()[0]);
+        for k in 1000..1400 {
+            let s = (gamma - 1.0) * u(k)[0];
+            // (A little sensor noise: a residual the fit explains exactly has no spread.)
+            let r: [f64; 4] = std::array::from_fn(|i| b[i] * s + 1e-5 * rng.normal());
+            test.push(k as f64 * 0.02, &r, &u(k), false);
+        }
+        let len = test.len();
+        for part in [30, 100, 150] {
+            let within = test.whitened_gain_or_offset_within(0, len, part).unwrap();
+            assert_eq!(within.kind, ChangeKind::Gain);
+            assert!(
+                (within.value - gamma).abs() < 1e-3,
+                "{part}: {}",
+                within.value
+            );
+            let from_part = test.whitened_gain_or_offset(0, part).unwrap();
+            assert!(
+                (from_part.value - gamma).abs() > 0.05,
+                "{part}: {}",
+                from_part.value
+            );
+        }
     }
 
     #[test]
