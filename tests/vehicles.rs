@@ -717,12 +717,14 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// again after a release when the fit is where it was, hexa motor 5 1.3; held between clear
 /// fits, quad motor 4 0.0, hexa motor 5 1.1; with the gusts' colour learned on through the
 /// fault (`ChangeTest::push_identified`) elevator 4.7; with the fits on earlier stores of the
-/// fault pooled (`FitBank`) elevator 2.9, aileron 2.6. The bounds
+/// fault pooled (`FitBank`) elevator 2.9, aileron 2.6; with the class's unchanged
+/// coefficient kept after a release while the class stands (an offset's gain: a gust's
+/// release had let the aileron's wander to 0.77) aileron 0.0. The bounds
 /// leave room for a seed's split to move (the runs are seeded, but another machine's floating
 /// point may move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a
-/// mean over 10), and those of the tail, hexa motor 5 and the aileron are below what came
-/// before the consider update and the release's quantile, the elevator's below what came before
-/// the pooled fits. The line is not met: the gusts still move the gains beyond 0.05 on
+/// mean over 10), and those of the tail and hexa motor 5 are below what came before the
+/// consider update and the release's quantile, the elevator's below what came before the
+/// pooled fits, the aileron's below what came before the kept gain. The line is not met: the gusts still move the gains beyond 0.05 on
 /// some seeds, most the plane's elevator, whose fit the colour learned in the first seconds of
 /// flight still biases (see the README).
 #[test]
@@ -735,7 +737,7 @@ fn the_mit_ukf_gain_holds_near_the_truth_after_a_decided_fault() {
         ("hexa-x-motor5-stuck", 6.0),
         ("heli-swash2-loe", 8.0),
         ("heli-tail-bias", 2.0),
-        ("plane-aileron-bias", 5.0),
+        ("plane-aileron-bias", 1.0),
     ] {
         let shares: Vec<f64> = (1..=10)
             .map(|seed| {

@@ -1281,6 +1281,16 @@ impl Diagnoser {
                 _ => {}
             }
         }
+        for (j, st) in self.actuators.iter().enumerate() {
+            let kind = match st.active {
+                Some(FaultClass::LossOfEffectiveness) => Some(IdentifiedKind::Gain),
+                // A drift is an offset that moves: it leaves the gain as a bias does.
+                Some(FaultClass::Bias | FaultClass::Drift) => Some(IdentifiedKind::Offset),
+                Some(FaultClass::Stuck) => Some(IdentifiedKind::Stuck),
+                _ => None,
+            };
+            filters.class_in_force(j, kind);
+        }
         filters.set_fault_in_force(self.fault_in_force());
         for j in 0..filters.actuators() {
             if filters.awaits_identification(j) {
