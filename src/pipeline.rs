@@ -1543,7 +1543,7 @@ mod tests {
     /// Records the inputs the pipeline gives the filters (`true` for a coast) and passes the
     /// commands on.
     use crate::estimate::EstimatorError;
-    use crate::estimate::vehicle::Identified;
+    use crate::estimate::vehicle::{Identified, IdentifiedKind};
 
     /// Each input the filters were given, and whether it was a coast's.
     type InputLog = std::sync::Arc<std::sync::Mutex<Vec<(bool, Vec<f64>)>>>;
@@ -1600,6 +1600,9 @@ mod tests {
         }
         fn recovered(&mut self, j: usize) {
             self.inner.recovered(j)
+        }
+        fn class_in_force(&mut self, j: usize, kind: Option<IdentifiedKind>) {
+            self.inner.class_in_force(j, kind)
         }
     }
 

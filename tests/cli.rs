@@ -275,7 +275,7 @@ fn the_summary_says_which_fault_cleared_and_when() {
     };
     // With the fault's kind and onset (the decisions' first fault on motor 1).
     assert!(
-        row("motor1 ").ends_with("cleared at t=136.18 s (loss_of_effectiveness from t=113.56 s)"),
+        row("motor1 ").ends_with("cleared at t=136.10 s (loss_of_effectiveness from t=113.56 s)"),
         "{out}"
     );
     assert!(row("motor2 ").ends_with("healthy"), "{out}");

@@ -718,8 +718,8 @@ fn a_drifting_offset_reads_as_drift_and_a_step_does_not() {
 /// fits, quad motor 4 0.0, hexa motor 5 1.1; with the gusts' colour learned on through the
 /// fault (`ChangeTest::push_identified`) elevator 4.7; with the fits on earlier stores of the
 /// fault pooled (`FitBank`) elevator 2.9, aileron 2.6; with the class's unchanged
-/// coefficient kept after a release while the class stands (an offset's gain: a gust's
-/// release had let the aileron's wander to 0.77) aileron 0.0. The bounds
+/// coefficient kept at the last fit after a release while the class stands (an offset's
+/// gain: a gust's release had let the aileron's wander to 0.77) aileron 0.0. The bounds
 /// leave room for a seed's split to move (the runs are seeded, but another machine's floating
 /// point may move one: on seeds 11-40 one seed of swash 2 has 75 % of its steps off, 7.5 on a
 /// mean over 10), and those of the tail and hexa motor 5 are below what came before the

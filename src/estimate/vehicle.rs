@@ -138,11 +138,11 @@ pub trait VehicleFilters: Send {
     /// delta at +0.084 after the fault, bounds excluding 1), and what is known of the split is
     /// what was known before the fault. The MIT-ESMF's set is left as it is.
     fn recovered(&mut self, j: usize);
-    /// The kind of actuator `j`'s class in force (a loss a gain, a bias an offset, a stuck
-    /// output; `None` for no fault, a drift or a class still open), before each step's
+    /// The kind of actuator `j`'s class in force (a loss a gain, a bias or a drift an offset,
+    /// a stuck output; `None` for no fault or a class still open), before each step's
     /// [`Self::set_fault_in_force`]: after a release, the coefficient that class leaves
-    /// unchanged stays where the fit had it while the class stands.
-    fn class_in_force(&mut self, _j: usize, _kind: Option<IdentifiedKind>) {}
+    /// unchanged stays at the last fit while the class stands.
+    fn class_in_force(&mut self, j: usize, kind: Option<IdentifiedKind>);
 }
 
 /// A fault's coefficients as the diagnosis identifies them (see
@@ -412,22 +412,30 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
         }
     }
 
-    /// After a release, while the class stands, the MIT-UKF's updates leave the coefficient it
-    /// leaves unchanged (an offset's gain, a loss's bias) where the last fit had it: the class
-    /// says where it is, and the release only says that the innovations moved (the fault's
-    /// changed coefficient grew or went back, or a strong gust). Left to the updates, which
-    /// take the gusts for white noise, a gust's release moved the plane's aileron offset's gain
-    /// from 1 to 0.85 in one step and to 0.77 within a second, its bounds excluding 1, while
-    /// the class said bias (seed 5; steps off after onset + 5 s, seeds 1-40: 12 of 40 seeds
-    /// with any, to none).
-    fn consider_unchanged(&mut self, k: usize, kind: IdentifiedKind) {
+    /// After a release, while the class stands, the coefficient it leaves unchanged (an
+    /// offset's gain, a loss's bias) is reseated at the last fit, value and spread, and the
+    /// MIT-UKF's updates leave it there (a consider state, as while the fit is followed): the
+    /// class says where it is, and the release only says that the innovations moved (the
+    /// fault's changed coefficient grew or went back, or a strong gust). Left to the updates,
+    /// which take the gusts for white noise, a gust's release moved the plane's aileron
+    /// offset's gain from 1 to 0.85 in one step and to 0.77 within a second, its bounds
+    /// excluding 1, while the class said bias (seed 5). Reseated on every step, not only
+    /// held: a class that changes and comes back finds it at the fit, not where the updates
+    /// had taken it meanwhile, and a consider state's variance, which no update reduces,
+    /// does not grow with the process noise.
+    fn hold_unchanged(&mut self, k: usize, kind: IdentifiedKind) {
         let l = (N - 3) / 2;
-        let i = match kind {
-            IdentifiedKind::Offset => 3 + k,
-            IdentifiedKind::Gain => 3 + l + k,
+        let Some(c) = self.last_fit[k] else { return };
+        let [gain, bias] = fit_entries(k, l, &c);
+        let entry = match kind {
+            IdentifiedKind::Offset => gain,
+            IdentifiedKind::Gain => bias,
             IdentifiedKind::Stuck => return,
         };
-        self.ukf.ukf.consider[i] = true;
+        if super::ukf::reseatable::<N>(&entry) {
+            self.ukf.reseat_entries(&[entry]);
+            self.ukf.ukf.consider[entry.0] = true;
+        }
     }
 
     fn new_ukf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitUkf<RateModel<N, M>, N, M, S> {
@@ -682,8 +690,8 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         for k in 0..l {
             match self.following[k] {
                 Following::Kind(_) if now => self.consider_last_fit(k),
-                Following::Released(kind) if in_force && self.class_kind[k] == Some(kind) => {
-                    self.consider_unchanged(k, kind)
+                Following::Released(kind) if self.class_kind[k] == Some(kind) => {
+                    self.hold_unchanged(k, kind)
                 }
                 _ => {}
             }
@@ -1002,8 +1010,13 @@ mod tests {
         assert!(waiting(&pair).is_empty());
     }
 
-    #[test]
-    fn the_updates_leave_the_identification_while_followed() {
+    /// A calm quad-X sim whose motor 2 loses half its effect at 5 s, and a filter pair fed it
+    /// for 6 s with that loss then decided; the step function feeds the MIT-UKF one sample
+    /// and returns how far its state moved.
+    fn motor2_loss_decided() -> (
+        FilterPair<11, 4, 23>,
+        impl FnMut(&mut FilterPair<11, 4, 23>) -> SVector<f64, 11>,
+    ) {
         use crate::sim::fault::Fault;
         use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
         let dt = 0.02;
@@ -1014,7 +1027,7 @@ mod tests {
         let mut sim = VehicleSim::new(cfg).unwrap();
         let mut pair =
             FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, dt).unwrap());
-        let mut step = |pair: &mut FilterPair<11, 4, 23>| {
+        let mut step = move |pair: &mut FilterPair<11, 4, 23>| {
             let s = sim.step();
             let y = SVector::<f64, 4>::from_column_slice(&s.y);
             let before = pair.ukf.ukf.x;
@@ -1025,6 +1038,12 @@ mod tests {
             step(&mut pair);
         }
         pair.forget(1);
+        (pair, step)
+    }
+
+    #[test]
+    fn the_updates_leave_the_identification_while_followed() {
+        let (mut pair, mut step) = motor2_loss_decided();
         for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
             step(&mut pair);
             pair.set_fault_in_force(true);
@@ -1055,57 +1074,68 @@ mod tests {
         assert!(moved[4] != 0.0 && moved[8] != 0.0, "{moved}");
     }
 
-    /// After a release, while the class in force stands, the updates leave the coefficient
-    /// that class leaves unchanged (a loss's bias) where the fit had it and move the other; a
-    /// class of another kind, or none, frees it.
+    /// After a release, while the class in force stands, the coefficient that class leaves
+    /// unchanged (a loss's bias, an offset's gain) stays at the last fit and the other moves;
+    /// a class of another kind, or none, frees it, and when the class comes back it is at the
+    /// fit again (not where the updates took it meanwhile).
     #[test]
     fn after_a_release_the_class_keeps_its_unchanged_coefficient() {
-        use crate::sim::fault::Fault;
-        use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
-        let dt = 0.02;
-        let profile = Profile::resolve("quad-x").unwrap();
-        let mut cfg = VehicleSimConfig::calm(profile.clone(), dt, 7);
-        cfg.faults
-            .push(toml::from_str::<Fault>("actuator='motor2'\nt=5.0\ngamma=0.5").unwrap());
-        let mut sim = VehicleSim::new(cfg).unwrap();
-        let mut pair =
-            FilterPair::<11, 4, 23>::new(FilterSetup::from_profile(&profile, dt).unwrap());
-        let mut step = |pair: &mut FilterPair<11, 4, 23>| {
-            let s = sim.step();
-            let y = SVector::<f64, 4>::from_column_slice(&s.y);
-            let before = pair.ukf.ukf.x;
-            pair.ukf.try_step(&s.u[..4], &y).unwrap();
-            pair.ukf.ukf.x - before
+        let offset = Identified {
+            kind: IdentifiedKind::Offset,
+            gamma: 1.0,
+            gamma_std: 0.05,
+            delta: -0.1,
+            delta_std: 0.01,
+            tolerance: 0.04,
         };
-        for _ in 0..(6.0 / dt) as usize {
+        // (kind, fit, the held entry and its value at the fit, the free entry)
+        for (kind, fit, (held, at), free) in [
+            (IdentifiedKind::Gain, loss_at(0.4, 0.15), (8, 0.0), 4),
+            (IdentifiedKind::Offset, offset, (4, 1.0), 8),
+        ] {
+            let (mut pair, mut step) = motor2_loss_decided();
+            let class = |pair: &mut FilterPair<11, 4, 23>, kind| {
+                pair.class_in_force(1, kind);
+                pair.set_fault_in_force(true);
+            };
+            for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
+                step(&mut pair);
+                class(&mut pair, Some(kind));
+            }
+            pair.hold_class(1, Some(fit));
             step(&mut pair);
-        }
-        pair.forget(1);
-        let loss = Some(IdentifiedKind::Gain);
-        for _ in 0..=IDENTIFY_AFTER_S as usize * 50 + 1 {
-            step(&mut pair);
-            pair.class_in_force(1, loss);
-            pair.set_fault_in_force(true);
-        }
-        pair.hold_class(1, Some(loss_at(0.4, 0.15)));
-        step(&mut pair);
-        // Released: the bias stays at the fit's, the gain moves with the data.
-        pair.ukf.restart_identification();
-        pair.class_in_force(1, loss);
-        pair.set_fault_in_force(true);
-        for _ in 0..25 {
-            let moved = step(&mut pair);
-            assert!(moved[8] == 0.0 && moved[4] != 0.0, "{moved}");
-            pair.class_in_force(1, loss);
-            pair.set_fault_in_force(true);
-        }
-        assert_eq!(pair.ukf.ukf.x[8], 0.0);
-        // The class turns to a bias (or is open): both move.
-        for kind in [Some(IdentifiedKind::Offset), None] {
-            pair.class_in_force(1, kind);
-            pair.set_fault_in_force(true);
-            let moved = step(&mut pair);
-            assert!(moved[8] != 0.0 && moved[4] != 0.0, "{kind:?}: {moved}");
+            // Released: the held entry stays at the fit, the other moves with the data.
+            pair.ukf.restart_identification();
+            class(&mut pair, Some(kind));
+            for _ in 0..25 {
+                let moved = step(&mut pair);
+                assert!(
+                    moved[held] == 0.0 && moved[free] != 0.0,
+                    "{kind:?}: {moved}"
+                );
+                class(&mut pair, Some(kind));
+            }
+            assert_eq!(pair.ukf.ukf.x[held], at, "{kind:?}");
+            // Another class, or none: both move.
+            let other = match kind {
+                IdentifiedKind::Gain => IdentifiedKind::Offset,
+                _ => IdentifiedKind::Gain,
+            };
+            for k in [Some(other), None] {
+                class(&mut pair, k);
+                let moved = step(&mut pair);
+                assert!(moved[held] != 0.0 && moved[free] != 0.0, "{k:?}: {moved}");
+            }
+            assert_ne!(pair.ukf.ukf.x[held], at);
+            // The class back: at the fit again, with the fit's spread.
+            class(&mut pair, Some(kind));
+            assert_eq!(pair.ukf.ukf.x[held], at, "{kind:?}");
+            let sd = if held == 4 {
+                fit.gamma_std
+            } else {
+                fit.delta_std
+            };
+            assert!((pair.ukf.ukf.p[(held, held)] - sd * sd).abs() < 1e-15);
         }
     }
 
