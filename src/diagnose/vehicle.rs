@@ -122,6 +122,18 @@ pub enum FaultClass {
 }
 
 impl FaultClass {
+    /// What the class changes: a loss the gain, a bias or a drift the offset (a drift is an
+    /// offset that moves: it leaves the gain as a bias does), a stuck output both; `None`
+    /// for a class still open.
+    pub fn changed_kind(self) -> Option<IdentifiedKind> {
+        match self {
+            Self::LossOfEffectiveness => Some(IdentifiedKind::Gain),
+            Self::Bias | Self::Drift => Some(IdentifiedKind::Offset),
+            Self::Stuck => Some(IdentifiedKind::Stuck),
+            Self::Unclassified => None,
+        }
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             FaultClass::LossOfEffectiveness => "loss_of_effectiveness",
@@ -1194,6 +1206,14 @@ impl Diagnoser {
         (fit.0.is_finite() && fit.1.is_finite() && fit.1 > 0.0).then_some(fit)
     }
 
+    /// Whether the change test's reading names actuator `j` with its change at or before the
+    /// store's start (a later start is a change since the fault's).
+    fn reading_dates_the_store(&self, j: usize) -> bool {
+        let len = self.change.len();
+        self.reading
+            .is_some_and(|r| r.actuator == j && r.samples >= len)
+    }
+
     /// The fit of the fault in force on the store (`fitted`), or where the same fault's fits
     /// on earlier stretches are banked, those pooled with the fit on the samples since them
     /// (its regressors from the change, `ChangeTest::whitened_gain_or_offset_within`) where
@@ -1204,9 +1224,7 @@ impl Diagnoser {
     fn pooled_fit(&self, j: usize, kind: IdentifiedKind, fitted: (f64, f64)) -> (f64, f64) {
         let bank = &self.actuators[j].bank;
         let len = self.change.len();
-        let dated = self
-            .reading
-            .is_some_and(|r| r.actuator == j && r.samples >= len);
+        let dated = self.reading_dates_the_store(j);
         if !bank.holds(kind) || !dated {
             return fitted;
         }
@@ -1235,9 +1253,7 @@ impl Diagnoser {
     fn bank_fit(&mut self, j: usize, kind: IdentifiedKind) {
         let (len, stored) = (self.change.len(), self.change.stored());
         let bank = self.actuators[j].bank;
-        let dated = self
-            .reading
-            .is_some_and(|r| r.actuator == j && r.samples >= len);
+        let dated = self.reading_dates_the_store(j);
         let last = if bank.holds(kind) { bank.until } else { 0 };
         let since = stored.saturating_sub(last.max(self.clean_from)) as usize;
         if !dated || len < self.change.capacity() || since < len {
@@ -1282,14 +1298,7 @@ impl Diagnoser {
             }
         }
         for (j, st) in self.actuators.iter().enumerate() {
-            let kind = match st.active {
-                Some(FaultClass::LossOfEffectiveness) => Some(IdentifiedKind::Gain),
-                // A drift is an offset that moves: it leaves the gain as a bias does.
-                Some(FaultClass::Bias | FaultClass::Drift) => Some(IdentifiedKind::Offset),
-                Some(FaultClass::Stuck) => Some(IdentifiedKind::Stuck),
-                _ => None,
-            };
-            filters.class_in_force(j, kind);
+            filters.class_in_force(j, st.active.and_then(FaultClass::changed_kind));
         }
         filters.set_fault_in_force(self.fault_in_force());
         for j in 0..filters.actuators() {
