@@ -99,20 +99,25 @@ fn mit_ukf_tracks_gamma_after_the_fault() {
 }
 
 #[test]
-fn fig9_mit_esmf_tracks_closer_than_esmf_and_both_detect() {
-    // The MIT-ESMF adapts the AHC process set (its rate entries stay at q0: for measured
-    // coordinates the paper's loss has no minimum). It tracks gamma
-    // with a smaller steady RMSE than the ESMF after the noise step (3 seeds here); both
-    // detect at once.
-    let r = rows("paper-fig9-uniform-step", 3);
+fn fig9_mit_esmf_converges_closer_than_esmf_and_both_detect() {
+    // Paper finding (d): the MIT-ESMF converges faster than the ESMF in Fig. 9. Neither centre
+    // settles within 0.05 (no process-noise set brings the ESMF's there: `examples/esmf_floor`),
+    // so the finding is the error after the fault: over the 3 s after it (the convergence) and
+    // in steady state after the noise step, mean of 10 seeds. The MIT-ESMF adapts the AHC
+    // process set (its rate entries stay at q0: for measured coordinates the paper's loss has
+    // no minimum); without the adaptation the two filters are the same and this fails.
+    let r = rows("paper-fig9-uniform-step", 10);
     let (mit, esmf) = (row(&r, "mit-esmf"), row(&r, "esmf"));
+    let (mit_3s, esmf_3s) = (mit.gamma_rmse_3s.unwrap(), esmf.gamma_rmse_3s.unwrap());
     println!(
-        "steady gamma RMSE: mit-esmf {:.4} esmf {:.4}; detection {:?} {:?}",
+        "gamma RMSE 3 s after the fault: mit-esmf {mit_3s:.4} esmf {esmf_3s:.4}; steady: \
+         mit-esmf {:.4} esmf {:.4}; detection {:?} {:?}",
         mit.gamma_rmse_steady,
         esmf.gamma_rmse_steady,
         mit.detection_delay_s,
         esmf.detection_delay_s
     );
+    assert!(mit_3s < esmf_3s);
     assert!(mit.gamma_rmse_steady < esmf.gamma_rmse_steady);
     for row in [mit, esmf] {
         assert!(
