@@ -101,11 +101,13 @@ fn mit_ukf_tracks_gamma_after_the_fault() {
 #[test]
 fn fig9_mit_esmf_converges_closer_than_esmf_and_both_detect() {
     // Paper finding (d): the MIT-ESMF converges faster than the ESMF in Fig. 9. Neither centre
-    // settles within 0.05 (no process-noise set brings the ESMF's there: `examples/esmf_floor`),
-    // so the finding is the error after the fault: over the 3 s after it (the convergence) and
-    // in steady state after the noise step, mean of 10 seeds. The MIT-ESMF adapts the AHC
-    // process set (its rate entries stay at q0: for measured coordinates the paper's loss has
-    // no minimum); without the adaptation the two filters are the same and this fails.
+    // settles within 0.05, and no process-noise set tried in `examples/esmf_floor` (constant or
+    // scheduled with hindsight) gets the ESMF's there, so the finding is the error after the
+    // fault: over the 3 s after it (the convergence) and in steady state after the noise step,
+    // mean of 10 seeds (measured: 0.0709 against 0.0737, and 0.204 against 0.231). The
+    // MIT-ESMF adapts the AHC process set (its rate entries stay at q0: for measured
+    // coordinates the paper's loss has no minimum); without the adaptation the two filters are
+    // the same and this fails.
     let r = rows("paper-fig9-uniform-step", 10);
     let (mit, esmf) = (row(&r, "mit-esmf"), row(&r, "esmf"));
     let (mit_3s, esmf_3s) = (mit.gamma_rmse_3s.unwrap(), esmf.gamma_rmse_3s.unwrap());
@@ -117,8 +119,24 @@ fn fig9_mit_esmf_converges_closer_than_esmf_and_both_detect() {
         mit.detection_delay_s,
         esmf.detection_delay_s
     );
-    assert!(mit_3s < esmf_3s);
-    assert!(mit.gamma_rmse_steady < esmf.gamma_rmse_steady);
+    assert!(
+        mit_3s < esmf_3s,
+        "3 s RMSE: mit-esmf {mit_3s} esmf {esmf_3s}"
+    );
+    assert!(
+        mit.gamma_rmse_steady < esmf.gamma_rmse_steady,
+        "steady RMSE: mit-esmf {} esmf {}",
+        mit.gamma_rmse_steady,
+        esmf.gamma_rmse_steady
+    );
+    // Pins the reason the finding is read from the error: should a centre ever settle, the
+    // finding can be judged by settling time instead, and this test should say so.
+    assert!(
+        mit.settle_s.is_none() && esmf.settle_s.is_none(),
+        "settled: mit-esmf {:?} esmf {:?}",
+        mit.settle_s,
+        esmf.settle_s
+    );
     for row in [mit, esmf] {
         assert!(
             row.detection_delay_s.is_some_and(|d| d <= 1.0),
