@@ -8,23 +8,14 @@ use ahcmon::eval::bank::{BankNoise, kalman_p0, set_p0, x0};
 use ahcmon::eval::run_scenario;
 use ahcmon::model::PaperHeli;
 use ahcmon::scenario;
-use ahcmon::sim::paper::{PaperSample, PaperSim, PaperSimConfig, paper_params};
+use ahcmon::sim::paper::{PaperSample, PaperSim, paper_params};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 
 fn data() -> (Vec<PaperSample>, BankNoise) {
     let named = scenario::resolve("paper-fig5-gaussian").unwrap();
     let s = &named.scenario;
-    let mut sim = PaperSim::new(PaperSimConfig {
-        dt: s.dt(),
-        forward_speed: s.forward_speed_mps,
-        process_noise: s.process_noise.clone(),
-        measurement_noise: s.measurement_noise.clone(),
-        faults: s.faults.clone(),
-        dither: s.dither.clone(),
-        seed: 1,
-    })
-    .unwrap();
+    let mut sim = PaperSim::new(s.paper_sim_config(1)).unwrap();
     (
         (0..s.steps()).map(|_| sim.step()).collect(),
         BankNoise::nominal(&s.process_noise, &s.measurement_noise),

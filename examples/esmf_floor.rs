@@ -26,7 +26,7 @@ use ahcmon::estimate::{AdaptationParams, Esmf, EsmfParams, MitEsmf};
 use ahcmon::eval::bank::{BankNoise, set_p0, x0};
 use ahcmon::model::Model;
 use ahcmon::scenario::{NamedScenario, resolve};
-use ahcmon::sim::paper::{ESTIMATED, PaperSim, PaperSimConfig};
+use ahcmon::sim::paper::{ESTIMATED, PaperSim};
 use anyhow::{Context, bail};
 use nalgebra::Vector3;
 
@@ -190,16 +190,7 @@ fn run(
 ) -> anyhow::Result<RunResult> {
     let scn = &named.scenario;
     let dt = scn.dt();
-    let mut sim = PaperSim::new(PaperSimConfig {
-        dt,
-        forward_speed: scn.forward_speed_mps,
-        process_noise: scn.process_noise.clone(),
-        measurement_noise: scn.measurement_noise.clone(),
-        faults: scn.faults.clone(),
-        dither: scn.dither.clone(),
-        seed,
-    })
-    .map_err(anyhow::Error::msg)?;
+    let mut sim = PaperSim::new(scn.paper_sim_config(seed)).map_err(anyhow::Error::msg)?;
     let noise = BankNoise::nominal(&scn.process_noise, &scn.measurement_noise);
     let ahc_start = sim.model.ahc_start();
     let (q0, r) = (noise.set_q(), noise.set_r());

@@ -3,7 +3,7 @@
 
 use crate::sim::fault::Fault;
 use crate::sim::noise::NoiseSchedule;
-use crate::sim::paper::{ACTUATORS, Dither};
+use crate::sim::paper::{ACTUATORS, Dither, PaperSimConfig};
 use crate::sim::vehicle::{AttitudeDither, Gusts, Manoeuvre, ModelMismatch};
 use crate::telemetry::Profile;
 use crate::toml_file::{self, TomlFileError};
@@ -211,6 +211,19 @@ impl Scenario {
 
     pub fn dt(&self) -> f64 {
         1.0 / self.rate_hz
+    }
+
+    /// The paper simulation of this scenario with `seed` (meaningful when [`Self::is_paper`]).
+    pub fn paper_sim_config(&self, seed: u64) -> PaperSimConfig {
+        PaperSimConfig {
+            dt: self.dt(),
+            forward_speed: self.forward_speed_mps,
+            process_noise: self.process_noise.clone(),
+            measurement_noise: self.measurement_noise.clone(),
+            faults: self.faults.clone(),
+            dither: self.dither.clone(),
+            seed,
+        }
     }
 
     pub fn steps(&self) -> usize {

@@ -7,7 +7,7 @@ pub mod vehicle;
 
 use crate::diagnose::{BoundsDetector, BoundsEvent};
 use crate::scenario::{NamedScenario, Scenario};
-use crate::sim::paper::{ESTIMATED, PaperSim, PaperSimConfig};
+use crate::sim::paper::{ESTIMATED, PaperSim};
 use bank::{BankNoise, FILTERS, paper_bank};
 use serde::Serialize;
 use std::time::Instant;
@@ -118,16 +118,8 @@ pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Resu
     }
     let settings = scn.eval;
     let dt = scn.dt();
-    let cfg = PaperSimConfig {
-        dt,
-        forward_speed: scn.forward_speed_mps,
-        process_noise: scn.process_noise.clone(),
-        measurement_noise: scn.measurement_noise.clone(),
-        faults: scn.faults.clone(),
-        dither: scn.dither.clone(),
-        seed,
-    };
-    let mut sim = PaperSim::new(cfg).map_err(|e| EvalError::Sim(named.name.clone(), e))?;
+    let mut sim = PaperSim::new(scn.paper_sim_config(seed))
+        .map_err(|e| EvalError::Sim(named.name.clone(), e))?;
     let noise = BankNoise::nominal(&scn.process_noise, &scn.measurement_noise);
     let mut bank = paper_bank(&sim.model, &noise);
     let steps = scn.steps();
