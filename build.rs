@@ -1,5 +1,5 @@
 //! Generates the MAVLink dialect `ahcmon` (ardupilotmega + common + our AHC_ESTIMATE) from
-//! `dialects/ahcmon.xml` with mavlink-bindgen; `src/link/mod.rs` includes the result.
+//! `dialects/ahcmon.xml` with mavlink-bindgen; `src/protocol/mod.rs` includes the result.
 use mavlink_bindgen::{XmlDefinitions, emit_cargo_build_messages, generate};
 use std::path::PathBuf;
 

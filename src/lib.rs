@@ -8,6 +8,7 @@ pub mod estimate;
 pub mod eval;
 pub mod link;
 pub mod model;
+pub mod protocol;
 pub mod monitor;
 pub mod output;
 pub mod pipeline;

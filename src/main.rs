@@ -1030,8 +1030,8 @@ fn calibrate(
     let mut found = None;
     // Systems whose attitude the log holds: the vehicles a --sysid could name.
     let mut vehicles = std::collections::BTreeSet::new();
-    let mut note_vehicle = |frame: &ahcmon::link::Frame| {
-        if matches!(frame.msg, ahcmon::link::MavMessage::ATTITUDE(_)) {
+    let mut note_vehicle = |frame: &ahcmon::protocol::Frame| {
+        if matches!(frame.msg, ahcmon::protocol::MavMessage::ATTITUDE(_)) {
             vehicles.insert(frame.sysid);
         }
     };

@@ -401,7 +401,7 @@ fn excitation_low_does_not_push_the_fault_out_of_the_panel() {
 #[test]
 fn the_footer_shows_the_drops_there_are() {
     let (m, d, hist) = state_at(41.5);
-    let render_with = |counters: ahcmon::link::FrameCounters| {
+    let render_with = |counters: ahcmon::protocol::FrameCounters| {
         let link = LinkInfo {
             name: "udpin:127.0.0.1:14555".into(),
             rate_hz: 306.0,
@@ -417,7 +417,7 @@ fn the_footer_shows_the_drops_there_are() {
         !clean.contains("bad crc") && clean.contains("lost 0"),
         "{clean}"
     );
-    let dropped = render_with(ahcmon::link::FrameCounters {
+    let dropped = render_with(ahcmon::protocol::FrameCounters {
         unknown_id: 1739,
         resync: 3,
         ..Default::default()

@@ -1,13 +1,14 @@
 //! tlog reading on real logs (frame counts against pymavlink's, SOURCES.md) and on corrupted
 //! copies: everything dropped is counted, nothing panics, the good frames still come through.
 
-use ahcmon::link::{MavMessage, TlogReader, TlogWriter};
+use ahcmon::link::{TlogReader, TlogWriter};
+use ahcmon::protocol::MavMessage;
 use std::collections::BTreeMap;
 
 mod common;
 use common::data;
 
-fn read_all(bytes: &[u8]) -> (Vec<(u64, u32)>, ahcmon::link::FrameCounters) {
+fn read_all(bytes: &[u8]) -> (Vec<(u64, u32)>, ahcmon::protocol::FrameCounters) {
     let mut r = TlogReader::new(bytes);
     let mut out = Vec::new();
     while let Some((ts, f)) = r.next_frame().expect("reading from memory cannot fail") {
@@ -189,7 +190,7 @@ fn unknown_ids_are_skipped_whole() {
 
 #[test]
 fn writer_round_trips_through_the_reader() {
-    use ahcmon::link::dialects::ahcmon::{ATTITUDE_DATA, SERVO_OUTPUT_RAW_DATA};
+    use ahcmon::protocol::dialects::ahcmon::{ATTITUDE_DATA, SERVO_OUTPUT_RAW_DATA};
     let mut buf = Vec::new();
     {
         let mut w = TlogWriter::new(&mut buf);

@@ -1,179 +1,34 @@
-//! Live MAVLink connections, spelled as MAVProxy and rust-mavlink spell them:
-//! `udpin:HOST:PORT`, `udpout:HOST:PORT`, `udpbcast:HOST:PORT`, `tcpin:HOST:PORT`,
-//! `tcpout:HOST:PORT`, `serial:DEVICE:BAUD`.
+//! One live MAVLink connection over any transport (`udp.rs`, `tcp.rs`, `serial.rs`).
 //!
-//! UDP and TCP are framed by our own [`StreamFramer`], so every dropped byte is counted (the
-//! `mavlink` crate's `recv` skips silently, shared/mavlink.md §1.2). Outgoing kinds (`udpout`,
-//! `tcpout`) reconnect; `udpin` answers the last peer it heard from.
+//! Every transport is framed by our own [`StreamFramer`], so every dropped byte is counted
+//! (the `mavlink` crate's `recv` skips silently). Outgoing kinds (`udpout`, `tcpout`)
+//! reconnect; `udpin` answers the last peer it heard from.
 
-use super::frame::{Frame, FrameCounters, StreamFramer};
-use std::net::SocketAddr;
-use std::str::FromStr;
+use super::serial::Serial;
+use super::spec::{ConnError, ConnSpec, opening};
+use super::tcp::{TcpIn, TcpOut};
+use super::udp::Udp;
+use crate::protocol::frame::{Frame, FrameCounters, StreamFramer};
+use std::net::{Ipv6Addr, SocketAddr};
 use std::time::Duration;
-use thiserror::Error;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream, UdpSocket};
-
-/// How long a sender waits for an outgoing TCP connection before dropping the frame (it tries
-/// again a second later).
-const SEND_CONNECT_TIMEOUT: Duration = Duration::from_millis(100);
-/// How long a send may wait for room in a TCP peer's buffer.
-const SEND_WRITE_TIMEOUT: Duration = Duration::from_millis(100);
-
-#[derive(Debug, Error)]
-pub enum ConnError {
-    #[error(
-        "connection `{0}`: {1}; expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: is udpin:, tcp: is tcpout:)"
-    )]
-    Syntax(String, String),
-    #[error("connection `{spec}`: {source}")]
-    Io {
-        spec: String,
-        #[source]
-        source: std::io::Error,
-    },
-}
-
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum ConnSpec {
-    UdpIn(SocketAddr),
-    UdpOut(SocketAddr),
-    UdpBcast(SocketAddr),
-    TcpIn(SocketAddr),
-    TcpOut(SocketAddr),
-    Serial(String, u32),
-}
-
-/// Connection kinds (`udp` is `udpin`, `tcp` is `tcpout`, as in MAVProxy and pymavlink).
-const KINDS: [&str; 8] = [
-    "udpin", "udp", "udpout", "udpbcast", "tcpin", "tcpout", "tcp", "serial",
-];
-
-/// An I/O error of opening `spec`, with what was being done (the OS's text alone, "No such
-/// file or directory", named no device).
-fn opening(spec: &ConnSpec, what: String) -> impl Fn(std::io::Error) -> ConnError {
-    let spec = spec.to_string();
-    move |source| {
-        // A port taken is most often a ground station on its default port (14550).
-        let hint = if source.kind() == std::io::ErrorKind::AddrInUse {
-            "; another program (a ground station?) listens there: listen on a free port and have it forward to that one (MAVProxy --out=udp:127.0.0.1:PORT, or the ground station's MAVLink forwarding)"
-        } else {
-            ""
-        };
-        ConnError::Io {
-            spec: spec.clone(),
-            source: std::io::Error::new(source.kind(), format!("{what}: {source}{hint}")),
-        }
-    }
-}
-
-impl FromStr for ConnSpec {
-    type Err = ConnError;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let bad = |why: String| ConnError::Syntax(s.to_string(), why);
-        let (kind, rest) = s.split_once(':').ok_or_else(|| {
-            if KINDS.contains(&s) {
-                bad(format!("`{s}` needs an address after a `:`"))
-            } else {
-                bad("no kind before a `:`".into())
-            }
-        })?;
-        if kind == "serial" {
-            let (dev, baud) = rest
-                .rsplit_once(':')
-                .ok_or_else(|| bad("no baud rate".into()))?;
-            let baud = baud
-                .parse()
-                .map_err(|_| bad(format!("baud rate `{baud}` is not a whole number")))?;
-            if dev.is_empty() {
-                return Err(bad("no device".into()));
-            }
-            if baud == 0 {
-                return Err(bad("baud rate 0".into()));
-            }
-            return Ok(Self::Serial(dev.to_string(), baud));
-        }
-        if !KINDS.contains(&kind) {
-            return Err(bad(format!("unknown kind `{kind}`")));
-        }
-        let (host, port) = rest
-            .rsplit_once(':')
-            .filter(|(_, port)| !port.ends_with(']'))
-            .ok_or_else(|| bad("no port".into()))?;
-        if port.parse::<u16>().is_err() {
-            return Err(bad(format!(
-                "port `{port}` is not a number from 0 to 65535"
-            )));
-        }
-        // HOST may be a name (localhost): resolve it now, once.
-        let addr = std::net::ToSocketAddrs::to_socket_addrs(rest)
-            .ok()
-            .and_then(|mut a| a.next())
-            .ok_or_else(|| bad(format!("cannot resolve host `{host}`")))?;
-        Ok(match kind {
-            "udpin" | "udp" => Self::UdpIn(addr),
-            "udpout" => Self::UdpOut(addr),
-            "udpbcast" => Self::UdpBcast(addr),
-            "tcpin" => Self::TcpIn(addr),
-            "tcpout" | "tcp" => Self::TcpOut(addr),
-            _ => return Err(bad(format!("unknown kind `{kind}`"))),
-        })
-    }
-}
-
-impl std::fmt::Display for ConnSpec {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::UdpIn(a) => write!(f, "udpin:{a}"),
-            Self::UdpOut(a) => write!(f, "udpout:{a}"),
-            Self::UdpBcast(a) => write!(f, "udpbcast:{a}"),
-            Self::TcpIn(a) => write!(f, "tcpin:{a}"),
-            Self::TcpOut(a) => write!(f, "tcpout:{a}"),
-            Self::Serial(d, b) => write!(f, "serial:{d}:{b}"),
-        }
-    }
-}
 
 enum Transport {
-    Udp {
-        sock: UdpSocket,
-        /// Where sends go: fixed for udpout/udpbcast, the last sender for udpin.
-        peer: Option<SocketAddr>,
-        learn_peer: bool,
-    },
-    TcpIn {
-        listener: TcpListener,
-        stream: Option<TcpStream>,
-    },
-    TcpOut {
-        addr: SocketAddr,
-        stream: Option<TcpStream>,
-        /// Why the first connection attempt failed (the link retries every second).
-        refused: Option<String>,
-        /// A sender tries to reconnect at most this often (see `send`).
-        next_attempt: tokio::time::Instant,
-    },
-    /// Read as a byte stream through our own framer, like TCP, so that bad CRCs, resyncs
-    /// and unknown ids on a radio link are counted too.
-    Serial(Box<tokio_serial::SerialStream>),
+    Udp(Udp),
+    TcpIn(TcpIn),
+    TcpOut(TcpOut),
+    Serial(Serial),
 }
 
-/// Write a frame to a TCP stream; a failed write drops the stream (it is re-made on the next
-/// send or receive). True when written.
-async fn write_or_drop(stream: &mut Option<TcpStream>, frame: &[u8]) -> bool {
-    let Some(s) = stream.as_mut() else {
-        return false;
-    };
-    // A peer that stops reading fills the socket's buffer; waiting on it would stall the
-    // monitor, so a write that does not finish soon drops the connection (a partial frame
-    // has spoilt the stream anyway).
-    match tokio::time::timeout(SEND_WRITE_TIMEOUT, s.write_all(frame)).await {
-        Ok(Ok(())) => true,
-        _ => {
-            *stream = None;
-            false
-        }
-    }
+/// What one read of a transport gave the framer.
+pub(super) enum Read {
+    /// One datagram of this many bytes, from that sender (UDP keeps boundaries).
+    Datagram(usize, SocketAddr),
+    /// This many bytes of a byte stream.
+    Bytes(usize),
+    /// The stream was lost: a partial frame of it cannot complete.
+    Lost,
+    /// Nothing to parse (a connection made, a refused datagram, a wait).
+    Nothing,
 }
 
 /// What [`Link::recv_or_note`] brings.
@@ -191,8 +46,6 @@ pub struct Link {
     transport: Transport,
     framer: StreamFramer,
     buf: Vec<u8>,
-    /// Times an outgoing TCP connection was re-established.
-    pub reconnects: u64,
     /// What happened to a TCP connection since last asked (connected, lost), for the user.
     notes: std::collections::VecDeque<String>,
     /// UDP: the sender of the datagram being parsed, and per autopilot (system id) the address
@@ -209,79 +62,54 @@ const TWO_SOURCES_WITHIN: Duration = Duration::from_secs(1);
 impl Link {
     pub async fn open(spec: ConnSpec) -> Result<Self, ConnError> {
         let transport = match &spec {
-            ConnSpec::UdpIn(a) => Transport::Udp {
-                sock: UdpSocket::bind(a)
+            ConnSpec::UdpIn(a) => Transport::Udp(
+                Udp::listen(*a)
                     .await
                     .map_err(opening(&spec, format!("cannot listen on UDP {a}")))?,
-                peer: None,
-                learn_peer: true,
-            },
+            ),
             ConnSpec::UdpOut(a) => {
-                let local: SocketAddr = if a.is_ipv4() {
-                    "0.0.0.0:0".parse().expect("literal")
+                let local = if a.is_ipv4() {
+                    SocketAddr::from(([0, 0, 0, 0], 0))
                 } else {
-                    "[::]:0".parse().expect("literal")
+                    SocketAddr::from((Ipv6Addr::UNSPECIFIED, 0))
                 };
-                Transport::Udp {
-                    sock: UdpSocket::bind(local).await.map_err(opening(
-                        &spec,
-                        format!("cannot open a UDP socket on {local}"),
-                    ))?,
-                    peer: Some(*a),
-                    learn_peer: false,
-                }
+                Transport::Udp(Udp::send_to(local, *a).await.map_err(opening(
+                    &spec,
+                    format!("cannot open a UDP socket on {local}"),
+                ))?)
             }
-            ConnSpec::UdpBcast(a) => {
-                let io = opening(&spec, "cannot open a UDP broadcast socket".into());
-                let sock = UdpSocket::bind("0.0.0.0:0").await.map_err(&io)?;
-                sock.set_broadcast(true).map_err(&io)?;
-                Transport::Udp {
-                    sock,
-                    peer: Some(*a),
-                    learn_peer: false,
-                }
-            }
-            ConnSpec::TcpIn(a) => Transport::TcpIn {
-                listener: TcpListener::bind(a)
+            ConnSpec::UdpBcast(a) => Transport::Udp(Udp::broadcast(*a).await.map_err(
+                opening(&spec, "cannot open a UDP broadcast socket".into()),
+            )?),
+            ConnSpec::TcpIn(a) => Transport::TcpIn(
+                TcpIn::listen(*a)
                     .await
                     .map_err(opening(&spec, format!("cannot listen on TCP {a}")))?,
-                stream: None,
-            },
-            ConnSpec::TcpOut(a) => {
-                let (stream, refused) = match TcpStream::connect(a).await {
-                    Ok(s) => (Some(s), None),
-                    Err(e) => (None, Some(e.to_string())),
-                };
-                Transport::TcpOut {
-                    addr: *a,
-                    stream,
-                    refused,
-                    next_attempt: tokio::time::Instant::now(),
-                }
-            }
-            ConnSpec::Serial(dev, baud) => {
-                use tokio_serial::SerialPortBuilderExt;
-                let port = tokio_serial::new(dev.as_str(), *baud)
-                    .open_native_async()
-                    .map_err(|e| {
-                        opening(&spec, format!("cannot open serial device {dev}"))(
-                            std::io::Error::other(e.to_string()),
-                        )
-                    })?;
-                Transport::Serial(Box::new(port))
-            }
+            ),
+            ConnSpec::TcpOut(a) => Transport::TcpOut(TcpOut::connect(*a).await),
+            ConnSpec::Serial(dev, baud) => Transport::Serial(
+                Serial::open(dev, *baud)
+                    .map_err(opening(&spec, format!("cannot open serial device {dev}")))?,
+            ),
         };
         Ok(Self {
             spec,
             transport,
             framer: StreamFramer::default(),
             buf: vec![0; 65536],
-            reconnects: 0,
             notes: Default::default(),
             datagram_from: None,
             autopilot_from: Default::default(),
             told_two_sources: Default::default(),
         })
+    }
+
+    /// Times an outgoing TCP connection was re-established (0 for every other link).
+    pub fn reconnects(&self) -> u64 {
+        match &self.transport {
+            Transport::TcpOut(t) => t.reconnects,
+            _ => 0,
+        }
     }
 
     /// A frame from an autopilot (component 1) whose system id another address is sending
@@ -311,8 +139,8 @@ impl Link {
     /// The local address (UDP/TCP), e.g. to learn the port of `udpin:127.0.0.1:0`.
     pub fn local_addr(&self) -> Option<SocketAddr> {
         match &self.transport {
-            Transport::Udp { sock, .. } => sock.local_addr().ok(),
-            Transport::TcpIn { listener, .. } => listener.local_addr().ok(),
+            Transport::Udp(u) => u.local_addr(),
+            Transport::TcpIn(t) => t.local_addr(),
             _ => None,
         }
     }
@@ -321,11 +149,7 @@ impl Link {
     /// for every other link, and once connected.
     pub fn not_connected(&self) -> Option<&str> {
         match &self.transport {
-            Transport::TcpOut {
-                stream: None,
-                refused,
-                ..
-            } => Some(refused.as_deref().unwrap_or("connection lost")),
+            Transport::TcpOut(t) => t.not_connected(),
             _ => None,
         }
     }
@@ -355,84 +179,34 @@ impl Link {
                 self.note_source(&f);
                 return Ok(Received::Frame(f));
             }
-            let io = |spec: &ConnSpec, source| ConnError::Io {
-                spec: spec.to_string(),
-                source,
+            let read = match &mut self.transport {
+                Transport::Udp(u) => u.read(&mut self.buf).await,
+                Transport::TcpIn(t) => t.read(&mut self.buf, &mut self.notes).await,
+                Transport::TcpOut(t) => t.read(&mut self.buf, &mut self.notes).await,
+                Transport::Serial(s) => s.read(&mut self.buf).await,
             };
-            match &mut self.transport {
-                Transport::Udp {
-                    sock,
-                    peer,
-                    learn_peer,
-                } => match sock.recv_from(&mut self.buf).await {
-                    Ok((n, from)) => {
-                        if *learn_peer {
-                            *peer = Some(from);
-                        }
-                        self.datagram_from = Some(from);
-                        // What the last datagram left is a partial frame that cannot complete
-                        // (UDP keeps boundaries): counted, not joined to this one.
-                        self.framer.end_datagram();
-                        self.framer.push(&self.buf[..n]);
-                        // Parse this datagram completely before the next one.
-                        if let Some(f) = self.framer.next_frame() {
-                            self.note_source(&f);
-                            return Ok(Received::Frame(f));
-                        }
-                        self.framer.end_datagram();
+            let read = read.map_err(|source| ConnError::Io {
+                spec: self.spec.to_string(),
+                source,
+            })?;
+            match read {
+                Read::Datagram(n, from) => {
+                    self.datagram_from = Some(from);
+                    // What the last datagram left is a partial frame that cannot complete
+                    // (UDP keeps boundaries): counted, not joined to this one.
+                    self.framer.end_datagram();
+                    self.framer.push(&self.buf[..n]);
+                    // Parse this datagram completely before the next one.
+                    if let Some(f) = self.framer.next_frame() {
+                        self.note_source(&f);
+                        return Ok(Received::Frame(f));
                     }
-                    // e.g. ICMP port unreachable after a send: not fatal for a datagram link.
-                    Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
-                    Err(e) => return Err(io(&self.spec, e)),
-                },
-                Transport::TcpIn { listener, stream } => match stream {
-                    None => {
-                        let (s, from) = listener.accept().await.map_err(|e| io(&self.spec, e))?;
-                        *stream = Some(s);
-                        self.notes
-                            .push_back(format!("a client connected from {from}"));
-                    }
-                    Some(s) => match s.read(&mut self.buf).await {
-                        // A partial frame of the lost connection cannot complete either.
-                        Ok(0) | Err(_) => {
-                            *stream = None;
-                            self.framer.end_datagram();
-                            self.notes
-                                .push_back("the client disconnected; waiting for another".into());
-                        }
-                        Ok(n) => self.framer.push(&self.buf[..n]),
-                    },
-                },
-                Transport::TcpOut { addr, stream, .. } => match stream {
-                    None => {
-                        tokio::time::sleep(Duration::from_secs(1)).await;
-                        if let Ok(s) = TcpStream::connect(*addr).await {
-                            *stream = Some(s);
-                            self.reconnects += 1;
-                            self.notes.push_back(format!("connected to {addr}"));
-                        }
-                    }
-                    Some(s) => match s.read(&mut self.buf).await {
-                        // A partial frame of the lost connection cannot complete either.
-                        Ok(0) | Err(_) => {
-                            *stream = None;
-                            self.framer.end_datagram();
-                            self.notes.push_back(format!(
-                                "connection to {addr} lost; reconnecting every second"
-                            ));
-                        }
-                        Ok(n) => self.framer.push(&self.buf[..n]),
-                    },
-                },
-                Transport::Serial(port) => match port.read(&mut self.buf).await {
-                    Ok(0) => {
-                        // A closed device (USB radio unplugged): wait and let the caller's
-                        // link-loss timer report it, rather than spinning.
-                        tokio::time::sleep(Duration::from_millis(100)).await;
-                    }
-                    Ok(n) => self.framer.push(&self.buf[..n]),
-                    Err(e) => return Err(io(&self.spec, e)),
-                },
+                    self.framer.end_datagram();
+                }
+                Read::Bytes(n) => self.framer.push(&self.buf[..n]),
+                // A partial frame of the lost connection cannot complete.
+                Read::Lost => self.framer.end_datagram(),
+                Read::Nothing => {}
             }
         }
     }
@@ -440,75 +214,25 @@ impl Link {
     /// Send one encoded frame. `Ok(false)`: nowhere to send yet (udpin before any peer,
     /// tcp without a connection).
     pub async fn send(&mut self, frame: &[u8]) -> Result<bool, ConnError> {
-        let spec = self.spec.to_string();
-        let io = |source| ConnError::Io {
-            spec: spec.clone(),
-            source,
+        let sent = match &mut self.transport {
+            Transport::Udp(u) => u.send(frame).await,
+            Transport::TcpIn(t) => t.send(frame, &mut self.notes).await,
+            Transport::TcpOut(t) => t.send(frame, &mut self.notes).await,
+            Transport::Serial(s) => s.send(frame).await,
         };
-        match &mut self.transport {
-            Transport::Udp { sock, peer, .. } => match peer {
-                Some(p) => match sock.send_to(frame, *p).await {
-                    Ok(_) => Ok(true),
-                    Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => Ok(false),
-                    Err(e) => Err(io(e)),
-                },
-                None => Ok(false),
-            },
-            // A sender never waits for its peer: the monitor's loop (estimators, decisions,
-            // ctrl-c) must go on while no planner is there. Frames until then are not sent.
-            Transport::TcpIn { listener, stream } => {
-                if stream.is_none() {
-                    // One look at the backlog, no waiting (not even a timer tick).
-                    let polled =
-                        std::future::poll_fn(|cx| std::task::Poll::Ready(listener.poll_accept(cx)))
-                            .await;
-                    match polled {
-                        std::task::Poll::Ready(Ok((s, from))) => {
-                            *stream = Some(s);
-                            self.notes
-                                .push_back(format!("a client connected from {from}"));
-                        }
-                        std::task::Poll::Ready(Err(e)) => return Err(io(e)),
-                        std::task::Poll::Pending => return Ok(false),
-                    }
-                }
-                Ok(write_or_drop(stream, frame).await)
-            }
-            Transport::TcpOut {
-                addr,
-                stream,
-                next_attempt,
-                ..
-            } => {
-                if stream.is_none() {
-                    let now = tokio::time::Instant::now();
-                    if now < *next_attempt {
-                        return Ok(false);
-                    }
-                    *next_attempt = now + Duration::from_secs(1);
-                    let connect = TcpStream::connect(*addr);
-                    match tokio::time::timeout(SEND_CONNECT_TIMEOUT, connect).await {
-                        Ok(Ok(s)) => {
-                            *stream = Some(s);
-                            self.reconnects += 1;
-                            self.notes.push_back(format!("connected to {addr}"));
-                        }
-                        _ => return Ok(false),
-                    }
-                }
-                Ok(write_or_drop(stream, frame).await)
-            }
-            Transport::Serial(port) => {
-                port.write_all(frame).await.map_err(io)?;
-                Ok(true)
-            }
-        }
+        sent.map_err(|source| ConnError::Io {
+            spec: self.spec.to_string(),
+            source,
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::link::ConnSpec;
+    use tokio::io::AsyncReadExt;
+    use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
     fn runtime() -> tokio::runtime::Runtime {
         tokio::runtime::Builder::new_current_thread()
@@ -564,7 +288,7 @@ mod tests {
             assert!(lost.contains("lost; reconnecting"), "{lost}");
             let again = next(&mut link).await;
             assert_eq!(again, format!("connected to {addr}"));
-            assert_eq!(link.reconnects, 1);
+            assert_eq!(link.reconnects(), 1);
         });
     }
 
@@ -658,14 +382,14 @@ mod tests {
 
     #[test]
     fn a_partial_frame_at_a_datagram_end_is_counted_not_joined_to_the_next() {
-        use crate::link::dialects::ahcmon::{HEARTBEAT_DATA, MavMessage};
+        use crate::protocol::dialects::ahcmon::{HEARTBEAT_DATA, MavMessage};
         runtime().block_on(async {
             let spec: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
             let mut link = Link::open(spec).await.expect("binds");
             let to = link.local_addr().expect("addr");
             let mut frame = Vec::new();
             let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
-            super::super::frame::encode_v2(1, 1, 0, &hb, &mut frame);
+            crate::protocol::frame::encode_v2(1, 1, 0, &hb, &mut frame);
             // Datagram 1: a whole frame, then the first half of another; datagram 2: the
             // second half (alone it is no frame), then a whole frame.
             let half = frame.len() / 2;
@@ -690,7 +414,7 @@ mod tests {
 
     #[test]
     fn one_system_id_from_two_addresses_at_once_is_told_once() {
-        use crate::link::dialects::ahcmon::{HEARTBEAT_DATA, MavMessage};
+        use crate::protocol::dialects::ahcmon::{HEARTBEAT_DATA, MavMessage};
         runtime().block_on(async {
             let spec: ConnSpec = "udpin:127.0.0.1:0".parse().expect("spec");
             let mut link = Link::open(spec).await.expect("binds");
@@ -698,7 +422,7 @@ mod tests {
             let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
             let frame = |sysid, compid| {
                 let mut f = Vec::new();
-                super::super::frame::encode_v2(sysid, compid, 0, &hb, &mut f);
+                crate::protocol::frame::encode_v2(sysid, compid, 0, &hb, &mut f);
                 f
             };
             let (a, b) = (

@@ -3,7 +3,7 @@
 //! Link loss per vehicle becomes a `link_lost` decision, its end `link_restored`.
 
 use super::conn::Link;
-use super::frame::{Frame, FrameCounters};
+use crate::protocol::frame::{Frame, FrameCounters};
 use crate::diagnose::vehicle::{Decision, Event};
 use crate::monitor::Monitor;
 use crate::pipeline::PipelineSink;
@@ -98,7 +98,7 @@ pub async fn run(
     mut alerts: Option<Link>,
     mut ui: Option<&mut crate::output::dashboard::TerminalUi>,
     opts: LiveOptions,
-) -> Result<LiveCounters, super::conn::ConnError> {
+) -> Result<LiveCounters, super::ConnError> {
     let clock = Instant::now();
     // The reader's drop counters, for the dashboard's footer while running and for the
     // summary if the reader does not hand back its final ones in time.
@@ -291,8 +291,8 @@ pub async fn run(
 /// The messages the estimators need, by id: ATTITUDE, SERVO_OUTPUT_RAW and the a_z source the
 /// assembler reads from this autopilot: RAW_IMU is in mG only on ArduPilot, so others (PX4)
 /// are asked for HIGHRES_IMU.
-fn needed(autopilot: crate::link::dialects::ahcmon::MavAutopilot) -> [(u32, &'static str); 3] {
-    use crate::link::dialects::ahcmon::MavAutopilot;
+fn needed(autopilot: crate::protocol::dialects::ahcmon::MavAutopilot) -> [(u32, &'static str); 3] {
+    use crate::protocol::dialects::ahcmon::MavAutopilot;
     let imu = if autopilot == MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA {
         (27, "RAW_IMU")
     } else {
@@ -412,7 +412,7 @@ impl RateRequests {
         hz: f64,
         sink: &mut dyn PipelineSink,
     ) -> Vec<Vec<u8>> {
-        use crate::link::dialects::ahcmon::{
+        use crate::protocol::dialects::ahcmon::{
             COMMAND_LONG_DATA, MavAutopilot, MavCmd, MavMessage, MavResult, MavType,
         };
         let mut out = vec![];
@@ -499,7 +499,7 @@ impl RateRequests {
             });
             let mut bytes = Vec::with_capacity(64);
             // As a component of the vehicle's own system (never as a GCS, sysid 255).
-            crate::link::frame::encode_v2(
+            crate::protocol::frame::encode_v2(
                 sysid,
                 crate::output::alerts::ALERT_COMPID,
                 self.seq,
@@ -610,7 +610,7 @@ fn link_event(monitor: &Monitor, sysid: u8, event: Event, detail: String) -> Dec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialects::ahcmon::{
+    use crate::protocol::dialects::ahcmon::{
         ATTITUDE_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
     };
     use crate::output::jsonl::MonitorFiles;
@@ -650,7 +650,7 @@ mod tests {
     /// The rates report after 5 s of a PX4 at 50 Hz that sends, at step k (20 ms apart),
     /// ATTITUDE, HIGHRES_IMU and what `outputs(k, ms)` gives.
     fn px4_rates_report(outputs: impl Fn(u32, u32) -> Vec<MavMessage>) -> String {
-        use crate::link::dialects::ahcmon::HIGHRES_IMU_DATA;
+        use crate::protocol::dialects::ahcmon::HIGHRES_IMU_DATA;
         let mut m = Monitor::new(PipelineConfig::default());
         let mut sink = MonitorFiles::new(None, None, 1).unwrap();
         sink.echo = false;
@@ -689,7 +689,7 @@ mod tests {
     /// both, the faster one is the outputs' rate, not their sum.
     #[test]
     fn outputs_as_actuator_output_status_count_for_the_rate_asked() {
-        use crate::link::dialects::ahcmon::{ACTUATOR_OUTPUT_STATUS_DATA, SERVO_OUTPUT_RAW_DATA};
+        use crate::protocol::dialects::ahcmon::{ACTUATOR_OUTPUT_STATUS_DATA, SERVO_OUTPUT_RAW_DATA};
         let status = |ms: u32| {
             MavMessage::ACTUATOR_OUTPUT_STATUS(ACTUATOR_OUTPUT_STATUS_DATA {
                 time_usec: u64::from(ms) * 1000,

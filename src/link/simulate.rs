@@ -3,7 +3,7 @@
 //! tlog, with the ground truth as JSON lines. Used by `ahcmon sim` and `ahcmon demo`.
 
 use super::conn::Link;
-use super::frame::encode_v2;
+use crate::protocol::frame::encode_v2;
 use super::tlog::TlogWriter;
 use crate::eval::vehicle::sim_config;
 use crate::output::jsonl::{JsonlWriter, NoiseInForce, TruthRecord};
@@ -69,7 +69,7 @@ pub enum FlyError {
     #[error("{0}")]
     Sim(String),
     #[error(transparent)]
-    Link(#[from] super::conn::ConnError),
+    Link(#[from] super::ConnError),
     #[error("writing: {0}")]
     Io(#[from] std::io::Error),
 }

@@ -7,8 +7,8 @@
 //! (`unknown_id`) — sliding into it would lose the frames after it (shared/mavlink.md §1.3);
 //! a record cut off by the end of the file is `truncated`.
 
-use super::dialects::ahcmon::MavMessage;
-use super::frame::{Frame, FrameCounters, MAGIC_V1, MAGIC_V2, Parsed, encode_v2, frame_len, parse};
+use crate::protocol::MavMessage;
+use crate::protocol::frame::{Frame, FrameCounters, MAGIC_V1, MAGIC_V2, Parsed, encode_v2, frame_len, parse};
 use std::fs::File;
 use std::io::{self, BufWriter, Read, Write};
 use std::path::Path;
@@ -144,7 +144,7 @@ impl<R: Read> TlogReader<R> {
         loop {
             let avail = self.buf.len() - self.pos;
             // Enough for the timestamp, the longest frame and the next record's head.
-            if avail < 8 + super::frame::MAX_FRAME + 9 && !self.eof {
+            if avail < 8 + crate::protocol::frame::MAX_FRAME + 9 && !self.eof {
                 self.fill()?;
                 continue;
             }
@@ -221,7 +221,7 @@ impl<W: Write> TlogWriter<W> {
     pub fn new(out: W) -> Self {
         Self {
             out,
-            frame: Vec::with_capacity(super::frame::MAX_FRAME),
+            frame: Vec::with_capacity(crate::protocol::frame::MAX_FRAME),
             seq: [0; 256],
             records: 0,
         }

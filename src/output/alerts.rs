@@ -8,11 +8,11 @@
 
 use crate::diagnose::vehicle::{Decision, Event, FaultClass};
 use crate::estimate::vehicle::AhcEstimate;
-use crate::link::dialects::ahcmon::{
+use crate::protocol::dialects::ahcmon::{
     AHC_ESTIMATE_DATA, AhcState, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag,
     MavSeverity, MavState, MavType, NAMED_VALUE_FLOAT_DATA, STATUSTEXT_DATA,
 };
-use crate::link::frame::encode_v2;
+use crate::protocol::frame::encode_v2;
 use crate::telemetry::Profile;
 use std::collections::{BTreeMap, VecDeque};
 
@@ -495,7 +495,7 @@ mod tests {
 
     #[test]
     fn value_names_are_unique_within_a_vehicle() {
-        use crate::link::frame::{Parsed, parse};
+        use crate::protocol::frame::{Parsed, parse};
         // `esc_motor_1`..`_3` all cut to `g_esc_moto`: every actuator takes its channel.
         let mut p = Profile::resolve("quad-x").unwrap();
         for (j, a) in p.actuators.iter_mut().enumerate() {
@@ -565,7 +565,7 @@ mod tests {
         }
         // Sent (the outbox) and then waiting (the queue), in order.
         let texts = |a: &Alerts| -> Vec<String> {
-            use crate::link::frame::{Parsed, parse};
+            use crate::protocol::frame::{Parsed, parse};
             let sent = a.outbox.iter().filter_map(|f| match parse(f) {
                 Parsed::Frame(f, _) => match f.msg {
                     MavMessage::STATUSTEXT(m) => {
@@ -623,8 +623,8 @@ mod tests {
     fn sent_texts(a: &Alerts) -> Vec<String> {
         a.outbox
             .iter()
-            .filter_map(|frame| match crate::link::frame::parse(frame) {
-                crate::link::frame::Parsed::Frame(f, _) => match f.msg {
+            .filter_map(|frame| match crate::protocol::frame::parse(frame) {
+                crate::protocol::frame::Parsed::Frame(f, _) => match f.msg {
                     MavMessage::STATUSTEXT(t) => Some(
                         String::from_utf8_lossy(&t.text[..])
                             .trim_end_matches('\0')
@@ -711,7 +711,7 @@ mod tests {
         }
         assert!(a.text_queue[&1].is_empty());
         for frame in a.outbox.drain(..) {
-            if let crate::link::frame::Parsed::Frame(f, _) = crate::link::frame::parse(&frame)
+            if let crate::protocol::frame::Parsed::Frame(f, _) = crate::protocol::frame::parse(&frame)
                 && let MavMessage::STATUSTEXT(t) = f.msg
             {
                 let text = String::from_utf8_lossy(&t.text[..]).into_owned();
@@ -747,7 +747,7 @@ mod tests {
 
     #[test]
     fn ahc_estimate_carries_the_profile_index_of_each_vehicle() {
-        use crate::link::frame::{Parsed, parse};
+        use crate::protocol::frame::{Parsed, parse};
         let quad = Profile::resolve("quad-x").unwrap();
         let plane = Profile::resolve("plane").unwrap();
         let est = [AhcEstimate::default(); 8];

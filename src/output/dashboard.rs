@@ -5,7 +5,7 @@
 
 use crate::diagnose::vehicle::{Decision, Event, FaultClass};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
-use crate::link::FrameCounters;
+use crate::protocol::FrameCounters;
 use crate::model::MAX_ACTUATORS;
 use crate::monitor::Monitor;
 use crate::output::jsonl::describe_with;

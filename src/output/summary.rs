@@ -3,7 +3,7 @@
 
 use crate::diagnose::vehicle::FaultClass;
 use crate::estimate::vehicle::FILTER_NAMES;
-use crate::link::FrameCounters;
+use crate::protocol::FrameCounters;
 use crate::monitor::Monitor;
 use std::fmt::Write;
 

@@ -6,7 +6,7 @@
 //! tolerance are never reused silently: the rates wait for fresh outputs, and an instant that
 //! never gets them is counted as `unmatched`.
 
-use crate::link::dialects::ahcmon::{MavAutopilot, MavMessage, MavModeFlag, MavType};
+use crate::protocol::dialects::ahcmon::{MavAutopilot, MavMessage, MavModeFlag, MavType};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -761,7 +761,7 @@ impl Assembler {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialects::ahcmon::{ATTITUDE_DATA, RAW_IMU_DATA, SERVO_OUTPUT_RAW_DATA};
+    use crate::protocol::dialects::ahcmon::{ATTITUDE_DATA, RAW_IMU_DATA, SERVO_OUTPUT_RAW_DATA};
 
     fn attitude(ms: u32) -> MavMessage {
         MavMessage::ATTITUDE(ATTITUDE_DATA {
@@ -799,7 +799,7 @@ mod tests {
 
     #[test]
     fn a_z_stays_with_one_imu() {
-        use crate::link::dialects::ahcmon::SCALED_IMU2_DATA;
+        use crate::protocol::dialects::ahcmon::SCALED_IMU2_DATA;
         let imu2 = |ms: u32| {
             MavMessage::SCALED_IMU2(SCALED_IMU2_DATA {
                 time_boot_ms: ms,
@@ -881,7 +881,7 @@ mod tests {
 
     #[test]
     fn px4_actuator_output_status_counts_its_active_outputs() {
-        use crate::link::dialects::ahcmon::ACTUATOR_OUTPUT_STATUS_DATA;
+        use crate::protocol::dialects::ahcmon::ACTUATOR_OUTPUT_STATUS_DATA;
         // PX4 sets `active` to the number of outputs (4 on a quad), not a bitmask (4 = 0b100
         // would leave only output 3).
         let mut actuator = [0.0f32; 32];
@@ -1158,7 +1158,7 @@ mod tests {
     /// loss of the old boot before its last stamped frame stays counted.
     #[test]
     fn a_reboot_takes_back_the_jump_of_the_new_boots_unstamped_frames() {
-        use crate::link::dialects::ahcmon::HEARTBEAT_DATA;
+        use crate::protocol::dialects::ahcmon::HEARTBEAT_DATA;
         let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA::default());
         let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
         let mut out = vec![];
@@ -1190,7 +1190,7 @@ mod tests {
     /// (component 1) samples.
     #[test]
     fn the_autopilot_component_takes_over_from_an_earlier_claimant() {
-        use crate::link::dialects::ahcmon::HEARTBEAT_DATA;
+        use crate::protocol::dialects::ahcmon::HEARTBEAT_DATA;
         let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
             autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
             mavtype: MavType::MAV_TYPE_QUADROTOR,

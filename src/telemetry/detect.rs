@@ -4,7 +4,7 @@
 
 use super::assembler::VehicleInfo;
 use super::profile::{Profile, ProfileError, Role, VehicleKind};
-use crate::link::dialects::ahcmon::{MavAutopilot, MavType};
+use crate::protocol::dialects::ahcmon::{MavAutopilot, MavType};
 use thiserror::Error;
 
 #[derive(Debug, Error)]

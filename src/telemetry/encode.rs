@@ -6,7 +6,7 @@
 //! (m/s²) instead, and no ArduPilot parameters. Pure: messages out, no I/O.
 
 use super::{Profile, Role, VehicleKind};
-use crate::link::dialects::ahcmon::{
+use crate::protocol::dialects::ahcmon::{
     ACTUATOR_OUTPUT_STATUS_DATA, ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, HEARTBEAT_DATA,
     HIGHRES_IMU_DATA, MavAutopilot, MavMessage, MavModeFlag, MavParamType, MavState,
     MavSysStatusSensor, MavType, PARAM_VALUE_DATA, RAW_IMU_DATA, SERVO_OUTPUT_RAW_DATA,

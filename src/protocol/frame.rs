@@ -278,7 +278,7 @@ impl StreamFramer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::dialects::ahcmon::ATTITUDE_DATA;
+    use crate::protocol::dialects::ahcmon::ATTITUDE_DATA;
 
     fn attitude_frame(k: u32) -> Vec<u8> {
         let msg = MavMessage::ATTITUDE(ATTITUDE_DATA {
