@@ -1,8 +1,8 @@
 //! Frames of any number of vehicles → per-vehicle telemetry → per-vehicle pipelines. Pure:
 //! the tlog replay, the live monitor and the tests feed it frames.
 
-use crate::protocol::Frame;
 use crate::pipeline::{PipelineConfig, PipelineSink, VehiclePipeline};
+use crate::protocol::Frame;
 use crate::telemetry::{Assembler, AssemblerConfig};
 use std::collections::BTreeMap;
 

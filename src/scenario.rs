@@ -393,6 +393,33 @@ pub fn all_builtin() -> Result<Vec<NamedScenario>, ScenarioError> {
     BUILTIN.iter().map(|(stem, _)| resolve(stem)).collect()
 }
 
+/// The scenario's faults and end as the monitor will show them: on the simulated autopilot's
+/// clock, which reads `BOOT_OFFSET_S` at the scenario's start (a vehicle is not connected to at
+/// boot). E.g. `swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s`.
+pub fn script_on_vehicle_clock(scenario: &Scenario) -> String {
+    // Two decimals at most (1.12 + 10 is 11.120000000000001 in floating point).
+    let clock = |t: f64| {
+        let v = format!("{:.2}", t + crate::telemetry::encode::BOOT_OFFSET_S);
+        format!("t={} s", v.trim_end_matches('0').trim_end_matches('.'))
+    };
+    let faults: Vec<String> = scenario
+        .faults
+        .iter()
+        .map(|f| {
+            let until = f
+                .until
+                .map_or(String::new(), |u| format!(" until {}", clock(u)));
+            format!("{} at {}{until}", f.describe(), clock(f.t))
+        })
+        .collect();
+    let faults = if faults.is_empty() {
+        "no faults".to_string()
+    } else {
+        faults.join(", ")
+    };
+    format!("{faults}; ends at {}", clock(scenario.duration_s))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -423,6 +450,14 @@ mod tests {
         assert!(
             err.contains("process_noise") && err.contains("NaN"),
             "{err}"
+        );
+    }
+    #[test]
+    fn the_demo_script_is_told_on_the_clock_the_monitor_shows() {
+        let named = resolve("heli-demo").unwrap();
+        assert_eq!(
+            script_on_vehicle_clock(&named.scenario),
+            "swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s"
         );
     }
 }

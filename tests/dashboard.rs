@@ -157,7 +157,7 @@ fn link_lost_in_the_footer_at_both_sizes() {
 fn the_header_carries_the_demo_script() {
     // The demo's faults are told on the clock the decisions use (the autopilot's, 10 s ahead).
     let named = ahcmon::scenario::resolve("heli-demo").unwrap();
-    let script = ahcmon::link::simulate::script_on_vehicle_clock(&named.scenario);
+    let script = ahcmon::scenario::script_on_vehicle_clock(&named.scenario);
     let (m, d, hist) = state_at(41.5);
     let mut term = Terminal::new(TestBackend::new(200, 40)).unwrap();
     let ui = UiState {

@@ -78,9 +78,11 @@ impl Link {
                     format!("cannot open a UDP socket on {local}"),
                 ))?)
             }
-            ConnSpec::UdpBcast(a) => Transport::Udp(Udp::broadcast(*a).await.map_err(
-                opening(&spec, "cannot open a UDP broadcast socket".into()),
-            )?),
+            ConnSpec::UdpBcast(a) => Transport::Udp(
+                Udp::broadcast(*a)
+                    .await
+                    .map_err(opening(&spec, "cannot open a UDP broadcast socket".into()))?,
+            ),
             ConnSpec::TcpIn(a) => Transport::TcpIn(
                 TcpIn::listen(*a)
                     .await

@@ -2,9 +2,7 @@
 //! transport. I/O only: the frames themselves are `crate::protocol`.
 
 pub mod conn;
-pub mod live;
 mod serial;
-pub mod simulate;
 pub mod spec;
 mod tcp;
 pub mod tlog;

@@ -8,7 +8,9 @@
 //! a record cut off by the end of the file is `truncated`.
 
 use crate::protocol::MavMessage;
-use crate::protocol::frame::{Frame, FrameCounters, MAGIC_V1, MAGIC_V2, Parsed, encode_v2, frame_len, parse};
+use crate::protocol::frame::{
+    Frame, FrameCounters, MAGIC_V1, MAGIC_V2, Parsed, encode_v2, frame_len, parse,
+};
 use std::fs::File;
 use std::io::{self, BufWriter, Read, Write};
 use std::path::Path;

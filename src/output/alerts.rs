@@ -711,7 +711,8 @@ mod tests {
         }
         assert!(a.text_queue[&1].is_empty());
         for frame in a.outbox.drain(..) {
-            if let crate::protocol::frame::Parsed::Frame(f, _) = crate::protocol::frame::parse(&frame)
+            if let crate::protocol::frame::Parsed::Frame(f, _) =
+                crate::protocol::frame::parse(&frame)
                 && let MavMessage::STATUSTEXT(t) = f.msg
             {
                 let text = String::from_utf8_lossy(&t.text[..]).into_owned();

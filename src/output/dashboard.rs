@@ -5,10 +5,10 @@
 
 use crate::diagnose::vehicle::{Decision, Event, FaultClass};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
-use crate::protocol::FrameCounters;
 use crate::model::MAX_ACTUATORS;
 use crate::monitor::Monitor;
 use crate::output::jsonl::describe_with;
+use crate::protocol::FrameCounters;
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Direction, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};

@@ -3,8 +3,8 @@
 
 use crate::diagnose::vehicle::FaultClass;
 use crate::estimate::vehicle::FILTER_NAMES;
-use crate::protocol::FrameCounters;
 use crate::monitor::Monitor;
+use crate::protocol::FrameCounters;
 use std::fmt::Write;
 
 /// Why most rate instants found no outputs: the outputs come less often, or they are stamped

@@ -2,49 +2,21 @@
 //! ArduPilot sends them, paced in real time (or a multiple), to a live connection and/or a
 //! tlog, with the ground truth as JSON lines. Used by `ahcmon sim` and `ahcmon demo`.
 
-use super::conn::Link;
-use crate::protocol::frame::encode_v2;
-use super::tlog::TlogWriter;
-use crate::eval::vehicle::sim_config;
-use crate::output::jsonl::{JsonlWriter, NoiseInForce, TruthRecord};
-use crate::scenario::NamedScenario;
-use crate::sim::vehicle::VehicleSim;
-use crate::telemetry::encode::{BOOT_OFFSET_S, SimTelemetry};
+use ahcmon::eval::vehicle::sim_config;
+use ahcmon::link::{ConnError, Link, TlogWriter};
+use ahcmon::output::jsonl::{JsonlWriter, NoiseInForce, TruthRecord};
+use ahcmon::protocol::frame::encode_v2;
+use ahcmon::scenario::NamedScenario;
+use ahcmon::sim::vehicle::VehicleSim;
+use ahcmon::telemetry::encode::{BOOT_OFFSET_S, SimTelemetry};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 
-/// The scenario's faults and end as the monitor will show them: on the simulated autopilot's
-/// clock, which reads `BOOT_OFFSET_S` at the scenario's start (a vehicle is not connected to at
-/// boot). E.g. `swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s`.
-pub fn script_on_vehicle_clock(scenario: &crate::scenario::Scenario) -> String {
-    // Two decimals at most (1.12 + 10 is 11.120000000000001 in floating point).
-    let clock = |t: f64| {
-        let v = format!("{:.2}", t + BOOT_OFFSET_S);
-        format!("t={} s", v.trim_end_matches('0').trim_end_matches('.'))
-    };
-    let faults: Vec<String> = scenario
-        .faults
-        .iter()
-        .map(|f| {
-            let until = f
-                .until
-                .map_or(String::new(), |u| format!(" until {}", clock(u)));
-            format!("{} at {}{until}", f.describe(), clock(f.t))
-        })
-        .collect();
-    let faults = if faults.is_empty() {
-        "no faults".to_string()
-    } else {
-        faults.join(", ")
-    };
-    format!("{faults}; ends at {}", clock(scenario.duration_s))
-}
-
 pub struct FlyOptions {
     pub sysid: u8,
     /// Which autopilot the stream sounds like.
-    pub flavour: crate::telemetry::encode::Flavour,
+    pub flavour: ahcmon::telemetry::encode::Flavour,
     pub seed: u64,
     /// Multiple of real time; None = as fast as possible.
     pub speed: Option<f64>,
@@ -65,11 +37,11 @@ pub struct FlyReport {
 #[derive(Debug, thiserror::Error)]
 pub enum FlyError {
     #[error(transparent)]
-    Setup(#[from] crate::eval::EvalError),
+    Setup(#[from] ahcmon::eval::EvalError),
     #[error("{0}")]
     Sim(String),
     #[error(transparent)]
-    Link(#[from] super::ConnError),
+    Link(#[from] ConnError),
     #[error("writing: {0}")]
     Io(#[from] std::io::Error),
 }
@@ -143,16 +115,4 @@ pub async fn fly(
         w.flush()?;
     }
     Ok(report)
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn the_demo_script_is_told_on_the_clock_the_monitor_shows() {
-        let named = crate::scenario::resolve("heli-demo").unwrap();
-        assert_eq!(
-            super::script_on_vehicle_clock(&named.scenario),
-            "swash2 gain 0.6 at t=42 s, tail bias +0.15 at t=55 s; ends at t=68 s"
-        );
-    }
 }

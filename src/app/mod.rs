@@ -1,0 +1,234 @@
+//! The commands, one file each; they wire sources, the pipeline and sinks. Shared here: how
+//! results reach stdout, the checks on outputs before anything is created, and the errors
+//! that are the user's input (exit code 2) rather than ours (exit code 1).
+
+use crate::cli::RunArgs;
+use ahcmon::eval::EvalError;
+use ahcmon::link::ConnError;
+use ahcmon::output::jsonl::MonitorFiles;
+use ahcmon::pipeline::PipelineConfig;
+use ahcmon::scenario::{NamedScenario, ScenarioError};
+use ahcmon::telemetry::{Profile, ProfileError};
+use anyhow::Context;
+use std::path::{Path, PathBuf};
+
+/// `print!` that ends the program quietly when stdout is closed (`ahcmon eval | head`)
+/// instead of panicking; other write errors are reported on stderr once and output stops.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = write!(std::io::stdout(), $($arg)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            eprintln!("ahcmon: cannot write to stdout: {e}");
+            std::process::exit(1);
+        }
+    }};
+}
+
+/// `println!` with the same handling as `out!`.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        out!("{}\n", format_args!($($arg)*))
+    };
+}
+
+pub mod calibrate;
+pub mod eval;
+mod fly;
+mod live;
+pub mod monitor;
+mod rates;
+pub mod replay;
+pub mod sim;
+pub mod thresholds;
+
+impl RunArgs {
+    pub fn pipeline_config(&self) -> anyhow::Result<PipelineConfig> {
+        let profile = self.profile.as_deref().map(Profile::resolve).transpose()?;
+        if let Some(t) = self.calibrate_until
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(UsageError(format!(
+                "--calibrate-until {t}: must be a positive time in s"
+            ))
+            .into());
+        }
+        Ok(PipelineConfig {
+            profile,
+            calibrate_until: self.calibrate_until,
+            ..PipelineConfig::default()
+        })
+    }
+
+    /// The JSON-lines files, created only once no output names an input or another output.
+    pub fn files(
+        &self,
+        inputs: &[&Path],
+        more: &[(&str, Option<&Path>)],
+    ) -> anyhow::Result<MonitorFiles> {
+        let mut outputs = vec![
+            ("--decisions", self.decisions.as_deref()),
+            ("--estimates", self.estimates.as_deref()),
+        ];
+        outputs.extend_from_slice(more);
+        let mut inputs = inputs.to_vec();
+        inputs.extend(
+            self.profile
+                .as_deref()
+                .and_then(|p| file_input(p, ahcmon::telemetry::profile::BUILTIN)),
+        );
+        check_outputs(&inputs, &outputs)?;
+        MonitorFiles::new(
+            self.decisions.as_deref(),
+            self.estimates.as_deref(),
+            self.decimate,
+        )
+        .context("cannot create output file")
+    }
+}
+
+/// The file a scenario or profile argument reads, unless the name is a built-in one (which
+/// takes priority over a file of the same name).
+pub(crate) fn file_input<'a>(name: &'a str, builtin: &[(&str, &str)]) -> Option<&'a Path> {
+    (!builtin.iter().any(|(stem, _)| *stem == name)).then(|| Path::new(name))
+}
+
+/// Whether two paths name the same regular file: two existing ones by device and inode (hard
+/// links too), a new one by its directory's canonical path and its name. Devices
+/// (`/dev/null`) never clash.
+pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+        use std::os::unix::fs::MetadataExt;
+        return x.is_file() && y.is_file() && (x.dev(), x.ino()) == (y.dev(), y.ino());
+    }
+    fn canonical(p: &Path) -> Option<PathBuf> {
+        match std::fs::metadata(p) {
+            Ok(m) if !m.is_file() => None,
+            Ok(_) => std::fs::canonicalize(p).ok(),
+            Err(_) => {
+                let dir = p.parent().filter(|d| !d.as_os_str().is_empty());
+                Some(
+                    std::fs::canonicalize(dir.unwrap_or(Path::new(".")))
+                        .ok()?
+                        .join(p.file_name()?),
+                )
+            }
+        }
+    }
+    matches!((canonical(a), canonical(b)), (Some(x), Some(y)) if x == y)
+}
+
+/// Refuse, before anything is created, an output that would overwrite an input (a replayed
+/// log) or another output.
+pub(crate) fn check_outputs(
+    inputs: &[&Path],
+    outputs: &[(&str, Option<&Path>)],
+) -> Result<(), UsageError> {
+    let outputs: Vec<(&str, &Path)> = outputs
+        .iter()
+        .filter_map(|(flag, p)| p.map(|p| (*flag, p)))
+        .collect();
+    for (k, (flag, out)) in outputs.iter().enumerate() {
+        // Only an existing input can be overwritten (a built-in scenario name is no file).
+        if let Some(input) = inputs.iter().find(|i| i.is_file() && same_file(out, i)) {
+            return Err(UsageError(format!(
+                "{flag} {}: that is the input file {}, which it would overwrite",
+                out.display(),
+                input.display()
+            )));
+        }
+        if let Some((other, _)) = outputs[k + 1..].iter().find(|(_, o)| same_file(out, o)) {
+            return Err(UsageError(format!(
+                "{flag} and {other} name the same file ({})",
+                out.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Errors that are the user's input (exit code 2) rather than ours (exit code 1).
+pub(crate) fn is_input_error(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.is::<ScenarioError>()
+            || c.is::<UsageError>()
+            || c.is::<EvalError>()
+            || c.is::<ProfileError>()
+            || c.is::<InputFileError>()
+            || matches!(c.downcast_ref::<ConnError>(), Some(ConnError::Syntax(..)))
+    })
+}
+
+pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
+pub(crate) fn positive(name: &str, v: f64) -> anyhow::Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(UsageError(format!("{name} {v:?}: must be a positive number")).into())
+    }
+}
+
+/// A speed-up factor or a duration (s) that becomes a `Duration` or divides one: bounded, so
+/// that no conversion overflows (`--speed 1e-300` would ask to wait 10^300 s).
+pub(crate) fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> anyhow::Result<f64> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(UsageError(format!("{name} {v:?}: must be between {lo} and {hi}")).into())
+    }
+}
+
+/// Bounds of `--speed` (multiple of real time) and of the monitor's timeouts (s).
+pub(crate) const SPEED_RANGE: (f64, f64) = (1e-3, 1e6);
+
+pub(crate) const TIMEOUT_RANGE_S: (f64, f64) = (1e-3, 1e6);
+
+/// A monitor with default settings takes the first settle + calibration seconds of the
+/// flight as healthy: a scenario's fault in them becomes the vehicle's normal. Said by `sim`
+/// and `demo` (`demo --scenario quad-x-motor2-loe` decided only a wrong motor, silently).
+pub(crate) fn warn_fault_in_calibration(who: &str, named: &NamedScenario) {
+    let defaults = PipelineConfig::default();
+    let learned_until = defaults.settle_s + defaults.calibrate_s;
+    if let Some(f) = named.scenario.first_fault()
+        && f.t < learned_until
+    {
+        eprintln!(
+            "{who}: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later{})",
+            f.actuator,
+            f.t,
+            if who == "sim" {
+                "; or give the monitor --calibrate-until, or a profile ahcmon calibrate identified"
+            } else {
+                ""
+            }
+        );
+    }
+}
+
+pub(crate) fn now_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
+}
+
+/// An input file that cannot be read (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {source}")]
+pub(crate) struct InputFileError {
+    pub path: String,
+    pub source: std::io::Error,
+}
+
+/// A mistake in how the command line combines things (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub(crate) struct UsageError(pub String);

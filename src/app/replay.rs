@@ -1,0 +1,187 @@
+//! `ahcmon replay`: a telemetry log through the pipeline, as fast as the CPU goes or paced,
+//! with the dashboard or headless, and the summary at the end.
+
+use super::{InputFileError, SPEED_RANGE, UsageError, in_range};
+use crate::cli::{ReplayArgs, RunArgs};
+use ahcmon::link::TlogReader;
+use ahcmon::monitor::Monitor;
+use ahcmon::output::summary;
+use anyhow::Context;
+use std::io::IsTerminal;
+
+pub fn run(a: ReplayArgs) -> anyhow::Result<()> {
+    let ReplayArgs {
+        file,
+        run,
+        speed,
+        fast: _,
+        headless,
+        plot,
+    } = a;
+    // On a rayon worker, so each vehicle's two filters step on two cores.
+    rayon::scope(|_| replay(&file, &run, speed, plot.as_deref(), headless))
+}
+
+/// Longest a paced replay waits for the next record; a longer wait is a hole in the log (or
+/// a timestamp off by hours), skipped.
+const MAX_PACE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+fn replay(
+    file: &std::path::Path,
+    args: &RunArgs,
+    speed: Option<f64>,
+    plot: Option<&std::path::Path>,
+    headless: bool,
+) -> anyhow::Result<()> {
+    if let Some(x) = speed {
+        in_range("--speed", x, SPEED_RANGE.0, SPEED_RANGE.1)?;
+    }
+    let input_error = |source| InputFileError {
+        path: file.display().to_string(),
+        source,
+    };
+    let size = std::fs::metadata(file).map_err(input_error)?.len();
+    let mut reader = TlogReader::open(file).map_err(input_error)?;
+    let mut monitor = Monitor::new(args.pipeline_config()?);
+    let mut files = args.files(&[file], &[("--plot", plot)])?;
+    if let Some(p) = plot {
+        // Fail now rather than after a long replay.
+        std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
+        files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
+    }
+    // The dashboard at a replay speed a person can follow; --fast (the default) is headless.
+    let mut ui = if !headless && std::io::stdout().is_terminal() {
+        files.echo = false;
+        Some(
+            // The file's name: its whole path left no room for the counters.
+            ahcmon::output::dashboard::TerminalUi::start(&format!(
+                "replay {}",
+                file.file_name().map_or(file.display().to_string(), |n| n
+                    .to_string_lossy()
+                    .into_owned())
+            ))
+            .context("cannot start the dashboard (try --headless)")?,
+        )
+    } else {
+        None
+    };
+    let progress = ui.is_none() && std::io::stderr().is_terminal();
+    let started = std::time::Instant::now();
+    // Pacing for --speed: a log timestamp and the moment it was replayed.
+    let mut pace: Option<(u64, std::time::Instant)> = None;
+    let mut shown = 0;
+    let mut last_draw = std::time::Instant::now();
+    let mut quit = false;
+    while let Some((ts, frame)) = reader.next_frame().map_err(input_error)? {
+        if let Some(ui) = ui.as_mut()
+            && last_draw.elapsed() >= std::time::Duration::from_millis(100)
+        {
+            last_draw = std::time::Instant::now();
+            if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(&monitor) {
+                quit = true;
+                break;
+            }
+            let _ = ui.draw(
+                &monitor,
+                &files.seen,
+                reader.counters,
+                Some(0.0),
+                &Default::default(),
+            );
+        }
+        if let Some(x) = speed {
+            let (t0, at) = *pace.get_or_insert((ts, std::time::Instant::now()));
+            let due =
+                std::time::Duration::try_from_secs_f64(ts.saturating_sub(t0) as f64 * 1e-6 / x)
+                    .unwrap_or(std::time::Duration::MAX);
+            match due.checked_sub(at.elapsed()) {
+                // A hole in the log, or a clock that jumps: go on from here, not sleep through.
+                Some(wait) if wait > MAX_PACE_WAIT => {
+                    pace = Some((ts, std::time::Instant::now()));
+                }
+                Some(wait) => std::thread::sleep(wait),
+                None => {}
+            }
+        }
+        monitor.on_frame(&frame, &mut files);
+        // Every estimate into the chart: at 10 redraws a second, a replay as fast as the CPU
+        // goes charted only the last second of the log.
+        if let Some(ui) = ui.as_mut() {
+            ui.history.live.sample(&monitor);
+        }
+        if progress && size > 0 {
+            let pct = (reader.position() * 100 / size) as usize;
+            if pct != shown {
+                shown = pct;
+                eprint!("\rreplay: {pct:3}% [{:<40}]", "#".repeat(pct * 40 / 100));
+            }
+        }
+    }
+    monitor.finish(&mut files);
+    let replay_time = started.elapsed();
+    // End of the log: the dashboard stays until q.
+    if let Some(ui) = ui.as_mut()
+        && !quit
+    {
+        ui.mark_ended("END OF LOG");
+        loop {
+            if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(&monitor) {
+                break;
+            }
+            let _ = ui.draw(
+                &monitor,
+                &files.seen,
+                reader.counters,
+                None,
+                &Default::default(),
+            );
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+    }
+    drop(ui);
+    if progress {
+        eprint!("\r{:60}\r", "");
+    }
+    // Reported after the plot and the summary, which do not depend on the files.
+    let write_error = files
+        .error
+        .take()
+        .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
+    if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
+        let title = format!("ahcmon replay {}", file.display());
+        std::fs::write(p, rec.render(&title))
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        eprintln!("plot written to {}", p.display());
+    }
+    out!(
+        "{}",
+        summary::render(&monitor, &reader.counters, &files.seen)
+    );
+    outln!(
+        "replayed {} in {:.2} s",
+        file.display(),
+        replay_time.as_secs_f64()
+    );
+    write_error.map_or(Ok(()), Err)?;
+    // Not a telemetry log at all: say so with an input error, so a script can tell.
+    let c = &reader.counters;
+    if c.frames == 0 && c.unknown_id == 0 {
+        return Err(UsageError(format!(
+            "{}: no MAVLink frame in its {size} bytes; is it a telemetry log (.tlog)?",
+            file.display()
+        ))
+        .into());
+    }
+    // An estimation that failed (said when it happened and in the summary) is no success: a
+    // script must not take the log as checked. (A log with no flight in it is: the summary
+    // says why nothing was estimated.)
+    let failed: Vec<String> = monitor
+        .pipelines
+        .iter()
+        .filter_map(|(sysid, p)| p.failed().map(|why| format!("sysid {sysid}: {why}")))
+        .collect();
+    if !failed.is_empty() {
+        anyhow::bail!("the estimation failed ({})", failed.join("; "));
+    }
+    Ok(())
+}

@@ -1,0 +1,97 @@
+//! `ahcmon thresholds`: each vehicle's decision threshold calibrated on healthy Monte-Carlo
+//! flights.
+
+use crate::cli::ThresholdsArgs;
+use ahcmon::scenario::{self, NamedScenario};
+use std::io::IsTerminal;
+
+pub fn run(a: ThresholdsArgs) -> anyhow::Result<()> {
+    let ThresholdsArgs {
+        scenarios,
+        seeds,
+        json,
+    } = a;
+    rayon::scope(|_| thresholds(scenarios, seeds, json))
+}
+
+fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> {
+    use ahcmon::eval::thresholds::{CALIBRATION_FIRST_SEED, calibrate_threshold};
+    let list: Vec<NamedScenario> = if names.is_empty() {
+        scenario::all_builtin()?
+            .into_iter()
+            .filter(|n| n.name.ends_with("-healthy-gusts"))
+            .collect()
+    } else {
+        names
+            .iter()
+            .map(|n| scenario::resolve(n))
+            .collect::<Result<_, _>>()?
+    };
+    let seed_list: Vec<u64> = (0..seeds).map(|i| CALIBRATION_FIRST_SEED + i).collect();
+    let progress = std::io::stderr().is_terminal();
+    let mut out = vec![];
+    for named in &list {
+        if progress {
+            eprint!("\rthresholds: {} ({} flights)   ", named.name, seeds);
+        }
+        out.push(calibrate_threshold(named, &seed_list)?);
+    }
+    if progress {
+        eprint!("\r{:60}\r", "");
+    }
+    if json {
+        outln!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    outln!(
+        "{:<24} {:<12} {:>7} {:<9} {:>14} {:>14} {:>10} {:>10} {:>11} {:>9}",
+        "scenario",
+        "vehicle",
+        "flights",
+        "statistic",
+        "alarm-free ukf",
+        "alarm-free set",
+        "max ukf",
+        "max set",
+        "recommended",
+        "profile"
+    );
+    for c in &out {
+        let profile = ahcmon::telemetry::Profile::resolve(&c.vehicle).ok();
+        let rows = [
+            (
+                "deviation",
+                c.alarm_free,
+                c.max_abs_deviation,
+                c.recommended,
+                profile.as_ref().map(|p| p.diagnosis.threshold),
+            ),
+            (
+                "gain",
+                c.gain_alarm_free,
+                c.max_abs_gain_gap,
+                c.gain_recommended,
+                profile.as_ref().and_then(|p| p.diagnosis.gain_threshold),
+            ),
+        ];
+        for (stat, free, max, rec, current) in rows {
+            // A statistic that stayed 0 (for one filter, or both: no angle outputs, for the
+            // gain) has nothing to calibrate: the bisection's floor would read as a threshold.
+            let num = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+            outln!(
+                "{:<24} {:<12} {:>7} {:<9} {:>14} {:>14} {:>10.4} {:>10.4} {:>11} {:>9}",
+                c.scenario,
+                c.vehicle,
+                c.seeds.len(),
+                stat,
+                num(free[0]),
+                num(free[1]),
+                max[0],
+                max[1],
+                rec.map_or("-".into(), |r| format!("{r:.3}")),
+                current.map_or("-".into(), |t| format!("{t:.3}"))
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,271 @@
+//! The command line: one clap struct per command, shared option groups flattened.
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "ahcmon",
+    version,
+    about = "Actuator health monitor: estimates each actuator's gain (gamma) and bias (delta) with MIT-UKF and MIT-ESMF"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run scenarios through the simulator and all five filters (UKF, KF-UKF, MIT-UKF, ESMF,
+    /// MIT-ESMF) and score them against the truth: detection delay, settling time, RMSE,
+    /// truth-in-bounds, false decisions, µs per step.
+    Eval(EvalArgs),
+    /// Calibrate each vehicle's decision threshold on healthy Monte-Carlo flights: the smallest
+    /// threshold at which no healthy flight would raise a fault, times a margin. Flown with
+    /// seeds from 1001 on, which the tests and `eval` do not use.
+    ///
+    /// Two rows per scenario, one per statistic: `deviation` (the effective output's deviation
+    /// attributed to an actuator) and `gain` (angle outputs' gain statistic). Columns:
+    /// `alarm-free ukf` / `alarm-free set`, the smallest threshold at which the MIT-UKF's / the
+    /// MIT-ESMF's statistic raised no alarm on any flight; `max ukf` / `max set`, the largest
+    /// value of that statistic seen after the warm-up; `recommended`, 1.25 × the larger
+    /// alarm-free threshold; `profile`, the built-in profile's threshold now ("-": none).
+    Thresholds(ThresholdsArgs),
+    /// Fly a vehicle scenario in the simulator (with the monitor's filters and diagnosis
+    /// running on it), print its decisions as they are made, and write its ground truth,
+    /// decisions and estimates as JSON lines.
+    Sim(SimArgs),
+    /// Watch live vehicles on a MAVLink connection (e.g. udpin:0.0.0.0:14550 beside a ground
+    /// station): both filters and the diagnosis per vehicle, decisions as they happen, a summary
+    /// on exit (ctrl-c).
+    Monitor(MonitorArgs),
+    /// The built-in demonstration: a simulated H3-120 helicopter flies in this process over
+    /// loopback UDP to the monitor; 32 s into the flight swash servo 2 loses 40 % effectiveness,
+    /// at 45 s the tail servo gets a bias; headless it ends by itself after 58 s (the dashboard
+    /// stays until q). The monitor shows the autopilot's clock, which reads 10 s when the
+    /// flight starts: the faults come at t=42 s and t=55 s.
+    Demo(DemoArgs),
+    /// Identify a vehicle's model (D, G, c and the noise levels) from a healthy stretch of a
+    /// telemetry log and write it as a profile (usable with --profile FILE).
+    Calibrate(CalibrateArgs),
+    /// Replay a telemetry log (.tlog from any ground station) through both filters and the
+    /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
+    /// decisions, and counts of everything dropped).
+    Replay(ReplayArgs),
+}
+
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    /// Scenario files or built-in names (default: all built-in scenarios, the paper's figures
+    /// and ten minutes of healthy flight).
+    pub scenarios: Vec<String>,
+    /// Print a JSON array (one object per scenario × filter) instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Write one SVG per scenario (truth, estimates, bounds) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+    /// Run each scenario with this many seeds (the scenario's seed, +1, +2, ...).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub seeds: u64,
+    /// Write the decisions JSONL of the first seed (one vehicle scenario only).
+    #[arg(long, value_name = "FILE")]
+    pub decisions: Option<PathBuf>,
+    /// Write the estimates JSONL of the first seed (one vehicle scenario only).
+    #[arg(long, value_name = "FILE")]
+    pub estimates: Option<PathBuf>,
+    /// Write every k-th step's estimates.
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub decimate: u64,
+}
+
+#[derive(clap::Args)]
+pub struct ThresholdsArgs {
+    /// Healthy vehicle scenarios (default: the built-in *-healthy-gusts flights).
+    pub scenarios: Vec<String>,
+    /// Flights per scenario.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub seeds: u64,
+    /// Print JSON instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args)]
+pub struct SimArgs {
+    /// Scenario file or built-in name (a vehicle scenario, e.g. quad-x-motor2-loe).
+    #[arg(long)]
+    pub scenario: String,
+    /// Truth JSONL: per step, every actuator's true gamma and delta and the noise in force.
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
+    /// Decisions JSONL of the monitor running on the flight (one object a line).
+    #[arg(long, value_name = "FILE")]
+    pub decisions: Option<PathBuf>,
+    /// Estimates JSONL (both filters, every actuator, every step).
+    #[arg(long, value_name = "FILE")]
+    pub estimates: Option<PathBuf>,
+    /// Seed (default: the scenario's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Speak MAVLink like an autopilot on this connection (e.g. udpout:127.0.0.1:14550):
+    /// HEARTBEAT, ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU, SYS_STATUS, GLOBAL_POSITION_INT and
+    /// the frame parameters. Paced at --speed (default real time).
+    #[arg(long, value_name = "CONN")]
+    pub out: Option<String>,
+    /// Write the same MAVLink stream as a .tlog.
+    #[arg(long, value_name = "FILE")]
+    pub tlog: Option<PathBuf>,
+    /// Multiple of real time for --out (default 1); without --out the tlog is written as
+    /// fast as possible.
+    #[arg(long, value_name = "X", allow_negative_numbers = true)]
+    pub speed: Option<f64>,
+    /// MAVLink system id of the simulated vehicle.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=254))]
+    pub sysid: u8,
+    /// Which autopilot the stream sounds like: ardupilot (SERVO_OUTPUT_RAW, RAW_IMU and the
+    /// frame parameters) or px4 (ACTUATOR_OUTPUT_STATUS and HIGHRES_IMU, no ArduPilot
+    /// parameters).
+    #[arg(long, value_enum, default_value_t = AutopilotArg::Ardupilot)]
+    pub autopilot: AutopilotArg,
+}
+
+#[derive(clap::Args)]
+pub struct MonitorArgs {
+    /// udpin:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: and
+    /// tcp: are udpin: and tcpout:, as in MAVProxy). Not udpout or udpbcast: the monitor
+    /// sends nothing to the vehicle, so a UDP peer would never learn where to send.
+    pub conn: String,
+    #[command(flatten)]
+    pub run: RunArgs,
+    /// No dashboard: decisions are printed as they happen (automatic when stdout is not a
+    /// terminal).
+    #[arg(long)]
+    pub headless: bool,
+    /// A vehicle silent this long (s) gets a link_lost decision.
+    #[arg(
+        long,
+        default_value_t = 2.0,
+        value_name = "S",
+        allow_negative_numbers = true
+    )]
+    pub link_timeout: f64,
+    /// Exit after this long (s) without any frame, once frames have arrived (e.g. at the
+    /// end of a simulated flight).
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub exit_idle: Option<f64>,
+    /// Send alerts to a mission planner on this connection (usually
+    /// udpout:127.0.0.1:14551 into a MAVProxy master): HEARTBEAT, STATUSTEXT per decision,
+    /// NAMED_VALUE_FLOAT g_/d_<actuator> at 2 Hz and AHC_ESTIMATE.
+    #[arg(long, value_name = "CONN")]
+    pub alerts: Option<String>,
+    /// Ask each vehicle for ATTITUDE, SERVO_OUTPUT_RAW and RAW_IMU at this rate
+    /// (SET_MESSAGE_INTERVAL; reports COMMAND_ACK and the rates achieved). Off by
+    /// default: without it nothing is ever sent to the vehicle.
+    #[arg(long, value_name = "HZ", allow_negative_numbers = true)]
+    pub request_rates: Option<f64>,
+}
+
+#[derive(clap::Args)]
+pub struct DemoArgs {
+    /// Print the decisions instead of showing the dashboard (automatic when stdout is not a
+    /// terminal).
+    #[arg(long)]
+    pub headless: bool,
+    /// Another vehicle scenario instead of the built-in one (heli-demo).
+    #[arg(long, value_name = "FILE|NAME")]
+    pub scenario: Option<String>,
+    /// Decisions JSONL (one object a line).
+    #[arg(long, value_name = "FILE")]
+    pub decisions: Option<PathBuf>,
+    /// Estimates JSONL (both filters, every actuator, every step).
+    #[arg(long, value_name = "FILE")]
+    pub estimates: Option<PathBuf>,
+    /// Also send the alerts to a planner (see `monitor --alerts`).
+    #[arg(long, value_name = "CONN")]
+    pub alerts: Option<String>,
+    /// Multiple of real time (e.g. 4 for a quick look).
+    #[arg(
+        long,
+        default_value_t = 1.0,
+        value_name = "X",
+        allow_negative_numbers = true
+    )]
+    pub speed: f64,
+}
+
+#[derive(clap::Args)]
+pub struct CalibrateArgs {
+    /// The .tlog file.
+    pub file: PathBuf,
+    /// End of the healthy stretch (vehicle time, s since boot, as in the decisions' `t`);
+    /// it starts when the vehicle is airborne and settled.
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
+    pub until: f64,
+    /// The profile file to write.
+    #[arg(short = 'o', long = "output", value_name = "PROFILE.toml")]
+    pub output: PathBuf,
+    /// Start from this profile's geometry instead of the detected one.
+    #[arg(long, value_name = "NAME|FILE")]
+    pub profile: Option<String>,
+    /// Calibrate this vehicle (MAVLink system id) of a log that holds several (default:
+    /// the first whose stretch completes; the others are named).
+    #[arg(long, value_name = "ID")]
+    pub sysid: Option<u8>,
+}
+
+#[derive(clap::Args)]
+pub struct ReplayArgs {
+    /// The .tlog file.
+    pub file: PathBuf,
+    #[command(flatten)]
+    pub run: RunArgs,
+    /// Replay at this multiple of real time instead of as fast as possible.
+    #[arg(
+        long,
+        value_name = "X",
+        conflicts_with = "fast",
+        allow_negative_numbers = true
+    )]
+    pub speed: Option<f64>,
+    /// As fast as the CPU goes (the default).
+    #[arg(long)]
+    pub fast: bool,
+    /// No dashboard (automatic when stdout is not a terminal).
+    #[arg(long)]
+    pub headless: bool,
+    /// Draw every actuator's gamma and delta with both filters' bounds and the decisions
+    /// into this SVG file.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+}
+
+/// Options shared by `replay` and `monitor`.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Vehicle profile, built-in name (paper-heli, heli-h3-120, quad-plus, quad-x, hexa-x,
+    /// plane) or TOML file. Default: chosen from the vehicle's HEARTBEAT and parameters.
+    #[arg(long, value_name = "NAME|FILE")]
+    pub profile: Option<String>,
+    /// Decisions JSONL (one object a line).
+    #[arg(long, value_name = "FILE")]
+    pub decisions: Option<PathBuf>,
+    /// Estimates JSONL (both filters, every actuator, every step).
+    #[arg(long, value_name = "FILE")]
+    pub estimates: Option<PathBuf>,
+    /// Write every k-th step's estimates.
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub decimate: u64,
+    /// End the healthy calibration stretch at this vehicle time (s since boot, as in the
+    /// decisions' `t`); default: 20 s from when the vehicle is airborne and settled (3 s
+    /// after take-off).
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
+    pub calibrate_until: Option<f64>,
+}
+
+/// `sim --autopilot`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum AutopilotArg {
+    Ardupilot,
+    Px4,
+}
