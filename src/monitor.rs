@@ -1,7 +1,8 @@
 //! Frames of any number of vehicles → per-vehicle telemetry → per-vehicle pipelines. Pure:
 //! the tlog replay, the live monitor and the tests feed it frames.
 
-use crate::pipeline::{PipelineConfig, PipelineSink, VehiclePipeline};
+use crate::output::Sink;
+use crate::pipeline::{PipelineConfig, VehiclePipeline};
 use crate::protocol::Frame;
 use crate::telemetry::{Assembler, AssemblerConfig};
 use std::collections::BTreeMap;
@@ -23,7 +24,7 @@ impl Monitor {
         }
     }
 
-    pub fn on_frame(&mut self, frame: &Frame, sink: &mut dyn PipelineSink) {
+    pub fn on_frame(&mut self, frame: &Frame, sink: &mut dyn Sink) {
         self.samples.clear();
         self.assembler
             .on_frame(frame.sysid, frame.compid, &frame.msg, &mut self.samples);
@@ -35,7 +36,7 @@ impl Monitor {
     /// End of input: samples still waiting for their a_z are processed without it, and a
     /// reboot the new boot gave no sample after is still told (its warning, the summary's
     /// marks).
-    pub fn finish(&mut self, sink: &mut dyn PipelineSink) {
+    pub fn finish(&mut self, sink: &mut dyn Sink) {
         let ids: Vec<u8> = self.assembler.vehicles.keys().copied().collect();
         for sysid in ids {
             self.samples.clear();
@@ -53,7 +54,7 @@ impl Monitor {
         }
     }
 
-    fn run(&mut self, sysid: u8, sink: &mut dyn PipelineSink) {
+    fn run(&mut self, sysid: u8, sink: &mut dyn Sink) {
         if self.samples.is_empty() {
             return;
         }

@@ -8,7 +8,7 @@ use ahcmon::diagnose::vehicle::{Decision, Event};
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
 use ahcmon::output::dashboard::{ChartHistory, History, LinkInfo, UiState, render};
-use ahcmon::output::jsonl::MonitorFiles;
+use ahcmon::output::jsonl::Outputs;
 use ahcmon::pipeline::PipelineConfig;
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
@@ -45,7 +45,7 @@ fn state_at(until: f64) -> (Monitor, Vec<Decision>, History) {
 fn state_of(tlog: &std::path::Path, until: f64) -> (Monitor, Vec<Decision>, History) {
     let mut r = TlogReader::open(tlog).unwrap();
     let mut m = Monitor::new(PipelineConfig::default());
-    let mut files = MonitorFiles::new(None, None, 1).unwrap();
+    let mut files = Outputs::new(None, None, 1).unwrap();
     files.echo = false;
     let mut h = History::new(30.0);
     while let Some((_, f)) = r.next_frame().unwrap() {
@@ -320,7 +320,7 @@ fn the_chart_follows_a_reboot() {
     assert!(before.contains("50 s"), "{before}");
     // The same autopilot again from its boot.
     let mut r = TlogReader::open(demo_tlog()).unwrap();
-    let mut files = MonitorFiles::new(None, None, 1).unwrap();
+    let mut files = Outputs::new(None, None, 1).unwrap();
     files.echo = false;
     while let Some((_, f)) = r.next_frame().unwrap() {
         m.on_frame(&f, &mut files);
@@ -340,7 +340,7 @@ fn the_chart_follows_a_reboot() {
 fn a_frozen_chart_stands_and_keeps_recording() {
     let mut r = TlogReader::open(demo_tlog()).unwrap();
     let mut m = Monitor::new(PipelineConfig::default());
-    let mut files = MonitorFiles::new(None, None, 1).unwrap();
+    let mut files = Outputs::new(None, None, 1).unwrap();
     files.echo = false;
     let mut chart = ChartHistory::new(30.0);
     let mut frozen_at = None;

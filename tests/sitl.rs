@@ -8,7 +8,8 @@ use ahcmon::diagnose::vehicle::{Decision, Event, FaultClass};
 use ahcmon::estimate::vehicle::AhcEstimate;
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
-use ahcmon::pipeline::{PipelineConfig, PipelineSink};
+use ahcmon::output::Sink;
+use ahcmon::pipeline::PipelineConfig;
 use ahcmon::telemetry::Profile;
 use std::path::PathBuf;
 
@@ -22,8 +23,8 @@ struct Collect {
     messages: Vec<String>,
 }
 
-impl PipelineSink for Collect {
-    fn decision(&mut self, d: &Decision, _: &Profile) {
+impl Sink for Collect {
+    fn decision(&mut self, d: &Decision) {
         self.decisions.push(d.clone());
     }
     fn estimates(&mut self, t: f64, _: u8, est: &[&[AhcEstimate]; 2], _: &Profile) {
@@ -33,9 +34,6 @@ impl PipelineSink for Collect {
     }
     fn message(&mut self, _: u8, text: &str) {
         self.messages.push(text.to_owned());
-    }
-    fn link_event(&mut self, d: &Decision) {
-        self.decisions.push(d.clone());
     }
 }
 

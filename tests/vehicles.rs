@@ -256,22 +256,28 @@ for kind, path in zip(pairs[::2], pairs[1::2]):
 fn gamma_off_after_5s_is_what_the_steps_say() {
     use ahcmon::diagnose::vehicle::Decision;
     use ahcmon::estimate::vehicle::AhcEstimate;
-    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
+    use ahcmon::eval::vehicle::run_vehicle_scenario;
+    use ahcmon::output::Sink;
     use ahcmon::sim::vehicle::VehicleSample;
     struct Count {
         j: usize,
         from: f64,
+        /// The truth of the sample being estimated (the eval hands it over first).
+        gamma_true: f64,
         steps: [usize; 2],
         off: [usize; 2],
     }
-    impl StepSink for Count {
-        fn step(&mut self, s: &VehicleSample, est: &[&[AhcEstimate]; 2], _: &Profile) {
-            if s.t < self.from {
+    impl Sink for Count {
+        fn truth(&mut self, s: &VehicleSample, _: &Profile) {
+            self.gamma_true = s.gamma[self.j];
+        }
+        fn estimates(&mut self, t: f64, _: u8, est: &[&[AhcEstimate]; 2], _: &Profile) {
+            if t < self.from {
                 return;
             }
             for (f, row) in est.iter().enumerate() {
                 self.steps[f] += 1;
-                self.off[f] += ((row[self.j].gamma - s.gamma[self.j]).abs() > 0.05) as usize;
+                self.off[f] += ((row[self.j].gamma - self.gamma_true).abs() > 0.05) as usize;
             }
         }
         fn decision(&mut self, _: &Decision) {}
@@ -281,10 +287,11 @@ fn gamma_off_after_5s_is_what_the_steps_say() {
     let mut sink = Count {
         j: 1,
         from: fault.t + 5.0,
+        gamma_true: f64::NAN,
         steps: [0; 2],
         off: [0; 2],
     };
-    let faulty = run_vehicle_scenario(&named, 1, false, &mut sink).unwrap();
+    let faulty = run_vehicle_scenario(&named, 1, false, None, &mut sink).unwrap();
     for f in 0..2 {
         let want = 100.0 * sink.off[f] as f64 / sink.steps[f] as f64;
         let got = faulty.filters[f].metrics.gamma_off_after_5s_pct.unwrap();
@@ -303,18 +310,16 @@ fn gamma_off_after_5s_is_what_the_steps_say() {
 /// Every decision of one seed of a built-in vehicle scenario, as the eval makes them.
 fn decisions(name: &str, seed: u64) -> Vec<ahcmon::diagnose::vehicle::Decision> {
     use ahcmon::diagnose::vehicle::Decision;
-    use ahcmon::estimate::vehicle::AhcEstimate;
-    use ahcmon::eval::vehicle::{StepSink, run_vehicle_scenario};
-    use ahcmon::sim::vehicle::VehicleSample;
+    use ahcmon::eval::vehicle::run_vehicle_scenario;
+    use ahcmon::output::Sink;
     struct All(Vec<Decision>);
-    impl StepSink for All {
-        fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
+    impl Sink for All {
         fn decision(&mut self, d: &Decision) {
             self.0.push(d.clone());
         }
     }
     let mut all = All(vec![]);
-    run_vehicle_scenario(&resolve(name).unwrap(), seed, false, &mut all).unwrap();
+    run_vehicle_scenario(&resolve(name).unwrap(), seed, false, None, &mut all).unwrap();
     all.0
 }
 

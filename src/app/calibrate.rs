@@ -5,7 +5,7 @@ use super::{InputFileError, UsageError, check_outputs, file_input, positive};
 use crate::cli::{CalibrateArgs, RunArgs};
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
-use ahcmon::output::jsonl::MonitorFiles;
+use ahcmon::output::jsonl::Outputs;
 use anyhow::Context;
 
 pub fn run(a: CalibrateArgs) -> anyhow::Result<()> {
@@ -47,7 +47,7 @@ fn calibrate(
     // another kind, outputs without PWM) concern the profile written. Its vehicle makes no
     // decision before its calibration, where this stops; with several vehicles, another one
     // may have (--sysid runs only the one).
-    let mut files = MonitorFiles::new(None, None, 1)?;
+    let mut files = Outputs::new(None, None, 1)?;
     let mut found = None;
     // Systems whose attitude the log holds: the vehicles a --sysid could name.
     let mut vehicles = std::collections::BTreeSet::new();

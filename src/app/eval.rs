@@ -4,7 +4,7 @@ use super::{UsageError, check_outputs, file_input};
 use crate::cli::EvalArgs;
 use ahcmon::eval::vehicle::run_vehicle_scenario;
 use ahcmon::eval::{Run, aggregate, run_scenario};
-use ahcmon::output::jsonl::RunFiles;
+use ahcmon::output::jsonl::Outputs;
 use ahcmon::output::{svg, table};
 use ahcmon::scenario::{self, NamedScenario};
 use anyhow::Context;
@@ -36,7 +36,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
                 ("--estimates", estimates.as_deref()),
             ],
         )?;
-        let files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), decimate)
+        let files = Outputs::new(decisions.as_deref(), estimates.as_deref(), decimate)
             .context("cannot create output file")?;
         // The files come from the first seed; the table (all seeds) follows as usual.
         let written = run_with_files(&named, named.scenario.seed, files, false)?;
@@ -55,7 +55,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
 pub(crate) fn run_with_files(
     named: &NamedScenario,
     seed: u64,
-    mut files: RunFiles,
+    mut files: Outputs,
     print: bool,
 ) -> anyhow::Result<String> {
     if named.scenario.is_paper() {
@@ -66,7 +66,7 @@ pub(crate) fn run_with_files(
         .into());
     }
     files.echo = print;
-    let run = run_vehicle_scenario(named, seed, false, &mut files)?;
+    let run = run_vehicle_scenario(named, seed, false, None, &mut files)?;
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
     }
@@ -94,7 +94,7 @@ pub(crate) fn run_with_files(
             named.scenario.duration_s,
             run.vehicle,
             seed,
-            files.decisions_made,
+            files.seen.len(),
         );
     }
     Ok(written)

@@ -6,7 +6,7 @@ use super::rates::RateRequests;
 use ahcmon::diagnose::vehicle::{Decision, Event};
 use ahcmon::link::{ConnError, Link, Received};
 use ahcmon::monitor::Monitor;
-use ahcmon::pipeline::PipelineSink;
+use ahcmon::output::Sink;
 use ahcmon::protocol::{Frame, FrameCounters};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -95,7 +95,7 @@ impl LiveCounters {
 pub async fn run(
     mut link: Link,
     monitor: &mut Monitor,
-    sink: &mut ahcmon::output::jsonl::MonitorFiles,
+    sink: &mut ahcmon::output::jsonl::Outputs,
     mut alerts: Option<Link>,
     mut ui: Option<&mut ahcmon::output::dashboard::TerminalUi>,
     opts: LiveOptions,
@@ -192,7 +192,7 @@ pub async fn run(
                 if frame.sysid != 255 && frame.sysid != 0 {
                     last_seen.insert(frame.sysid, now);
                     if lost.insert(frame.sysid, false) == Some(true) {
-                        sink.link_event(&link_event(monitor, frame.sysid, Event::LinkRestored, "frames arrive again".into()));
+                        sink.decision(&link_event(monitor, frame.sysid, Event::LinkRestored, "frames arrive again".into()));
                     }
                 }
                 if let Some(hz) = opts.request_rates {
@@ -226,7 +226,7 @@ pub async fn run(
                         lost.insert(*sysid, true);
                         // Shortest form that shows the value (0.03 s, 2 s, 2.5 s).
                         let detail = format!("no frame for {} s", opts.link_timeout.as_secs_f64());
-                        sink.link_event(&link_event(monitor, *sysid, Event::LinkLost, detail));
+                        sink.decision(&link_event(monitor, *sysid, Event::LinkLost, detail));
                     }
                 }
                 // Headless, say once that nothing arrives (the dashboard's footer says it).
@@ -291,7 +291,7 @@ pub async fn run(
 /// Drain the alert component's queue onto the alert link (a failed send is not fatal: the
 /// planner may not be up yet).
 async fn send_alerts(
-    sink: &mut ahcmon::output::jsonl::MonitorFiles,
+    sink: &mut ahcmon::output::jsonl::Outputs,
     link: Option<&mut Link>,
     clock: Instant,
 ) {
@@ -363,7 +363,7 @@ fn link_event(monitor: &Monitor, sysid: u8, event: Event, detail: String) -> Dec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ahcmon::output::jsonl::MonitorFiles;
+    use ahcmon::output::jsonl::Outputs;
     use ahcmon::pipeline::PipelineConfig;
     use ahcmon::protocol::dialects::ahcmon::{
         ATTITUDE_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
@@ -403,7 +403,7 @@ mod tests {
     #[test]
     fn a_link_event_is_on_the_vehicles_clock_or_says_it_has_none() {
         let mut m = Monitor::new(PipelineConfig::default());
-        let mut sink = MonitorFiles::new(None, None, 1).unwrap();
+        let mut sink = Outputs::new(None, None, 1).unwrap();
         sink.echo = false;
         m.on_frame(
             &frame(MavMessage::HEARTBEAT(HEARTBEAT_DATA {

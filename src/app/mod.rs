@@ -5,7 +5,7 @@
 use crate::cli::RunArgs;
 use ahcmon::eval::EvalError;
 use ahcmon::link::ConnError;
-use ahcmon::output::jsonl::MonitorFiles;
+use ahcmon::output::jsonl::Outputs;
 use ahcmon::pipeline::PipelineConfig;
 use ahcmon::scenario::{NamedScenario, ScenarioError};
 use ahcmon::telemetry::{Profile, ProfileError};
@@ -67,7 +67,7 @@ impl RunArgs {
         &self,
         inputs: &[&Path],
         more: &[(&str, Option<&Path>)],
-    ) -> anyhow::Result<MonitorFiles> {
+    ) -> anyhow::Result<Outputs> {
         let mut outputs = vec![
             ("--decisions", self.decisions.as_deref()),
             ("--estimates", self.estimates.as_deref()),
@@ -80,7 +80,7 @@ impl RunArgs {
                 .and_then(|p| file_input(p, ahcmon::telemetry::profile::BUILTIN)),
         );
         check_outputs(&inputs, &outputs)?;
-        MonitorFiles::new(
+        Outputs::new(
             self.decisions.as_deref(),
             self.estimates.as_deref(),
             self.decimate,

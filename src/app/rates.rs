@@ -3,7 +3,7 @@
 //! heartbeat; then its COMMAND_ACKs and the rates achieved are reported.
 
 use ahcmon::monitor::Monitor;
-use ahcmon::pipeline::PipelineSink;
+use ahcmon::output::Sink;
 use ahcmon::protocol::Frame;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -130,7 +130,7 @@ impl RateRequests {
         frame: &Frame,
         monitor: &Monitor,
         hz: f64,
-        sink: &mut dyn PipelineSink,
+        sink: &mut dyn Sink,
     ) -> Vec<Vec<u8>> {
         use ahcmon::protocol::dialects::ahcmon::{
             COMMAND_LONG_DATA, MavAutopilot, MavCmd, MavMessage, MavResult, MavType,
@@ -258,7 +258,7 @@ impl RateRequests {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ahcmon::output::jsonl::MonitorFiles;
+    use ahcmon::output::jsonl::Outputs;
     use ahcmon::pipeline::PipelineConfig;
     use ahcmon::protocol::dialects::ahcmon::{
         ATTITUDE_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavType,
@@ -280,7 +280,7 @@ mod tests {
     fn px4_rates_report(outputs: impl Fn(u32, u32) -> Vec<MavMessage>) -> String {
         use ahcmon::protocol::dialects::ahcmon::HIGHRES_IMU_DATA;
         let mut m = Monitor::new(PipelineConfig::default());
-        let mut sink = MonitorFiles::new(None, None, 1).unwrap();
+        let mut sink = Outputs::new(None, None, 1).unwrap();
         sink.echo = false;
         let mut rates = RateRequests::default();
         let heartbeat = frame(MavMessage::HEARTBEAT(HEARTBEAT_DATA {

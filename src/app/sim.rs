@@ -9,7 +9,7 @@ use super::{
 use crate::cli::{AutopilotArg, SimArgs};
 use ahcmon::eval::vehicle::sim_config;
 use ahcmon::link::{ConnSpec, Link, TlogWriter};
-use ahcmon::output::jsonl::RunFiles;
+use ahcmon::output::jsonl::Outputs;
 use ahcmon::scenario::{self, NamedScenario};
 use anyhow::Context;
 use std::path::PathBuf;
@@ -59,7 +59,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         return sim_mavlink(&named, opts);
     }
     let (cfg, _) = sim_config(&named, 0)?;
-    let mut files = RunFiles::new(decisions.as_deref(), estimates.as_deref(), 1)
+    let mut files = Outputs::new(decisions.as_deref(), estimates.as_deref(), 1)
         .context("cannot create output file")?;
     if let Some(path) = &truth {
         files = files

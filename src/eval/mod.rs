@@ -114,7 +114,7 @@ struct Accum {
 pub fn run_scenario(named: &NamedScenario, seed: u64, keep_traces: bool) -> Result<Run, EvalError> {
     let scn: &Scenario = &named.scenario;
     if !scn.is_paper() {
-        return vehicle::run_vehicle_scenario(named, seed, keep_traces, &mut vehicle::NoSink);
+        return vehicle::run_vehicle_scenario(named, seed, keep_traces, None, &mut vehicle::NoSink);
     }
     let settings = scn.eval;
     let dt = scn.dt();

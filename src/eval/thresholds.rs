@@ -10,11 +10,11 @@
 //! see `diagnose::vehicle`) is calibrated the same way into the gain threshold.
 
 use super::EvalError;
-use super::vehicle::{StepSink, run_vehicle_scenario};
+use super::vehicle::run_vehicle_scenario;
 use crate::diagnose::vehicle::{Decision, DiagnosisParams};
 use crate::estimate::vehicle::AhcEstimate;
+use crate::output::Sink;
 use crate::scenario::NamedScenario;
-use crate::sim::vehicle::VehicleSample;
 use crate::telemetry::Profile;
 use rayon::prelude::*;
 
@@ -82,9 +82,9 @@ struct Collect {
     traces: [[Vec<Vec<f32>>; 2]; 2],
 }
 
-impl StepSink for Collect {
-    fn step(&mut self, s: &VehicleSample, est: &[&[AhcEstimate]; 2], _: &Profile) {
-        if s.t < self.warmup_s {
+impl Sink for Collect {
+    fn estimates(&mut self, t: f64, _: u8, est: &[&[AhcEstimate]; 2], _: &Profile) {
+        if t < self.warmup_s {
             return;
         }
         for (f, row) in est.iter().enumerate() {
@@ -104,9 +104,6 @@ impl StepSink for Collect {
         }
     }
     fn decision(&mut self, _: &Decision) {}
-    fn threshold(&self) -> Option<f64> {
-        Some(f64::INFINITY)
-    }
 }
 
 /// Fly `named` (a healthy vehicle scenario) with `seeds` and calibrate its threshold.
@@ -131,7 +128,8 @@ pub fn calibrate_threshold(
                 warmup_s: params.warmup_s,
                 traces: Default::default(),
             };
-            run_vehicle_scenario(named, seed, false, &mut sink)?;
+            // An infinite threshold: no decision feeds back into the filters calibrated on.
+            run_vehicle_scenario(named, seed, false, Some(f64::INFINITY), &mut sink)?;
             let mut out = [[(0.0f64, 0.0f64); 2]; 2];
             for (k, per_filter) in out.iter_mut().enumerate() {
                 for (f, slot) in per_filter.iter_mut().enumerate() {

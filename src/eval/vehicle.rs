@@ -3,11 +3,12 @@
 
 use super::{EvalError, FilterRun, Metrics, Run, Trace};
 use crate::diagnose::vehicle::{Decision, Diagnoser, DiagnosisParams, Event};
-use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES, build};
-use crate::model::MAX_ACTUATORS;
+use crate::estimate::vehicle::{FILTER_NAMES, build};
+use crate::output::Sink;
+use crate::pipeline::{Core, PipelineCounters, StepInput};
 use crate::scenario::NamedScenario;
 use crate::sim::fault::Fault;
-use crate::sim::vehicle::{ModelMismatch, VehicleSample, VehicleSim, VehicleSimConfig};
+use crate::sim::vehicle::{ModelMismatch, VehicleSim, VehicleSimConfig};
 use crate::telemetry::Profile;
 use std::time::Instant;
 
@@ -18,18 +19,6 @@ const CLASS_AT_S: f64 = 5.0;
 /// The MIT-UKF's gamma should be within the tolerance of the truth from this long after onset.
 const GAMMA_WITHIN_S: f64 = 5.0;
 const TRACE_POINTS: usize = 2000;
-
-/// What a caller may want to see of every step (JSONL writers).
-pub trait StepSink {
-    fn step(&mut self, sample: &VehicleSample, est: &[&[AhcEstimate]; 2], profile: &Profile);
-    fn decision(&mut self, d: &Decision);
-    /// A decision threshold to fly with instead of the profile's, for both statistics (the
-    /// threshold calibration flies with an infinite one, so that no decision feeds back into
-    /// the filters it calibrates on).
-    fn threshold(&self) -> Option<f64> {
-        None
-    }
-}
 
 /// True when `d` names an actuator that a scripted fault other than the scored one (`target`)
 /// has made faulty at `d.t`: such a decision is right, not false.
@@ -47,8 +36,7 @@ fn later_fault_named(faults: &[Fault], target: Option<&str>, d: &Decision) -> bo
 
 /// A sink that keeps nothing.
 pub struct NoSink;
-impl StepSink for NoSink {
-    fn step(&mut self, _: &VehicleSample, _: &[&[AhcEstimate]; 2], _: &Profile) {}
+impl Sink for NoSink {
     fn decision(&mut self, _: &Decision) {}
 }
 
@@ -81,22 +69,28 @@ pub fn sim_config(
     Ok((cfg, monitor))
 }
 
+/// Fly a vehicle scenario through the product's per-step core ([`Core::step`], as the
+/// telemetry pipeline runs it) and score it against the simulator's truth. `threshold`
+/// replaces the profile's decision threshold for both statistics (the threshold
+/// calibration flies with an infinite one, so that no decision feeds back into the filters
+/// it calibrates on).
 pub fn run_vehicle_scenario(
     named: &NamedScenario,
     seed: u64,
     keep_traces: bool,
-    sink: &mut dyn StepSink,
+    threshold: Option<f64>,
+    sink: &mut dyn Sink,
 ) -> Result<Run, EvalError> {
     let scn = &named.scenario;
     let err = |e: String| EvalError::Sim(named.name.clone(), e);
     let (cfg, mut profile) = sim_config(named, seed)?;
-    if let Some(th) = sink.threshold() {
+    if let Some(th) = threshold {
         profile.diagnosis.threshold = th;
         profile.diagnosis.gain_threshold = Some(th);
     }
     let dt = cfg.dt;
     let mut sim = VehicleSim::new(cfg).map_err(err)?;
-    let mut filters = build(&profile, dt).map_err(|e| err(e.to_string()))?;
+    let filters = build(&profile, dt).map_err(|e| err(e.to_string()))?;
     let l = filters.actuators();
     if filters.inputs() != l {
         // An identified model takes delayed commands and measured increments, which only the
@@ -108,7 +102,7 @@ pub fn run_vehicle_scenario(
     }
     let m = filters.measurements();
     let names = profile.actuator_names();
-    let mut diag = Diagnoser::new(DiagnosisParams::default(), 1, &profile, dt);
+    let diag = Diagnoser::new(DiagnosisParams::default(), 1, &profile, dt);
     let fault = scn.first_fault();
     let onset = fault.map(|f| f.t);
     let target = fault.and_then(|f| profile.actuator_index(&f.actuator));
@@ -116,10 +110,10 @@ pub fn run_vehicle_scenario(
     let steps = scn.steps();
     let steady_from = scn.duration_s * (1.0 - scn.eval.steady_fraction);
     let decimate = steps.div_ceil(TRACE_POINTS).max(1);
+    let mut core = Core::new(profile, filters, diag, 1);
+    let mut counters = PipelineCounters::default();
 
     let mut decisions: Vec<Decision> = Vec::new();
-    let mut new_decisions = Vec::new();
-    let mut est = [[AhcEstimate::default(); MAX_ACTUATORS]; 2];
     let mut nanos = 0u128;
     let mut errors = [0u64; 2];
     let mut last_violation: [Option<f64>; 2] = [None, None];
@@ -134,40 +128,25 @@ pub fn run_vehicle_scenario(
     let mut rates_prev: Option<[f64; 3]> = None;
     for k in 0..steps {
         let s = sim.step();
+        sink.truth(&s, &core.profile);
+        // The simulator's commands act over the step that ends at its measurement; every
+        // step but the first has the rates one period before, and no hole.
+        let step = StepInput {
+            t: s.t,
+            input: &s.u[..l],
+            y: &s.y[..m],
+            acting: &s.u[..l],
+            residual_from: rates_prev.as_ref(),
+        };
         let t0 = Instant::now();
-        let res = filters.step(&s.u[..l], &s.y[..m]);
+        let failed = core.step(&step, &mut counters, sink);
         nanos += t0.elapsed().as_nanos();
-        if let Some(prev) = rates_prev {
-            let r = filters.healthy_residual(&prev, &s.u[..l], &s.y[..m]);
-            diag.observe(s.t, &r, &s.u[..l]);
-        }
         rates_prev = Some([s.y[0], s.y[1], s.y[2]]);
-        for (f, r) in res.iter().enumerate() {
-            if r.is_err() {
-                errors[f] += 1;
-            }
-            for (j, slot) in est[f][..l].iter_mut().enumerate() {
-                *slot = filters.ahc(f, j);
-            }
+        for (f, failed) in failed.iter().enumerate() {
+            errors[f] += u64::from(*failed);
         }
-        let views = [&est[0][..l], &est[1][..l]];
-        new_decisions.clear();
-        diag.update(s.t, &s.u[..l], &views, &mut new_decisions);
-        for (f, row) in est.iter_mut().enumerate() {
-            for (j, e) in row[..l].iter_mut().enumerate() {
-                e.deviation = diag.deviation(f, j);
-                e.excursion = diag.excursion(f, j);
-                e.gain_gap = diag.gain_gap(f, j);
-            }
-        }
-        let views = [&est[0][..l], &est[1][..l]];
-        for d in &new_decisions {
-            sink.decision(d);
-        }
-        // As the live pipeline does.
-        diag.steer_filters(&new_decisions, &profile, filters.as_mut());
-        decisions.append(&mut new_decisions);
-        sink.step(&s, &views, &profile);
+        decisions.extend(core.decisions.iter().cloned());
+        let est = core.est;
         // Scores on the watched actuator (the faulty one; actuator 0 in a healthy flight).
         let (g_true, d_true) = (s.gamma[watch], s.delta[watch]);
         for f in 0..2 {
@@ -288,7 +267,7 @@ pub fn run_vehicle_scenario(
         .collect();
     Ok(Run {
         scenario: named.name.clone(),
-        vehicle: profile.name.clone(),
+        vehicle: core.profile.name.clone(),
         seed,
         truth,
         filters: runs,

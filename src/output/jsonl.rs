@@ -3,7 +3,7 @@
 
 use crate::diagnose::vehicle::Decision;
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
-use crate::eval::vehicle::StepSink;
+use crate::output::Sink;
 use crate::sim::vehicle::VehicleSample;
 use crate::telemetry::Profile;
 use serde::Serialize;
@@ -160,98 +160,16 @@ fn keep_first(slot: &mut Option<std::io::Error>, r: std::io::Result<()>) {
     }
 }
 
-/// Decision and estimate files fed by a vehicle run; the first write error is kept and
-/// reported at the end (nothing panics, nothing is silently dropped).
-pub struct RunFiles {
+/// Where a run's results go: the decision, estimate and truth JSON lines, the decisions
+/// echoed for the user, the `--plot` traces and the planner alerts. One for `replay`,
+/// `monitor` and `calibrate` (any number of vehicles) and for `sim` and `eval`. The first
+/// write error is kept and reported at the end (nothing panics, nothing is silently dropped).
+pub struct Outputs {
     pub decisions: Option<JsonlWriter<BufWriter<File>>>,
     pub estimates: Option<JsonlWriter<BufWriter<File>>>,
-    /// The simulator's truth, with the sensor noise in force.
+    /// The simulator's truth, with the sensor noise in force (`sim --truth`).
     pub truth: Option<(JsonlWriter<BufWriter<File>>, f64, f64)>,
-    /// Write every k-th step's estimates.
-    pub decimate: u64,
-    pub sysid: u8,
-    /// Also print each decision to stdout as it is made (`sim`).
-    pub echo: bool,
-    /// Decisions made (written or not).
-    pub decisions_made: u64,
-    steps: u64,
-    pub error: Option<std::io::Error>,
-}
-
-impl RunFiles {
-    pub fn new(
-        decisions: Option<&Path>,
-        estimates: Option<&Path>,
-        decimate: u64,
-    ) -> std::io::Result<Self> {
-        Ok(Self {
-            decisions: decisions.map(JsonlWriter::create).transpose()?,
-            estimates: estimates.map(JsonlWriter::create).transpose()?,
-            truth: None,
-            decimate: decimate.max(1),
-            sysid: 1,
-            echo: false,
-            decisions_made: 0,
-            steps: 0,
-            error: None,
-        })
-    }
-
-    /// Also write the truth file (`sim --truth`).
-    pub fn with_truth(mut self, path: &Path, gyro: f64, az: f64) -> std::io::Result<Self> {
-        self.truth = Some((JsonlWriter::create(path)?, gyro, az));
-        Ok(self)
-    }
-
-    fn keep(&mut self, r: std::io::Result<()>) {
-        keep_first(&mut self.error, r);
-    }
-}
-
-impl StepSink for RunFiles {
-    fn step(&mut self, s: &VehicleSample, est: &[&[AhcEstimate]; 2], profile: &Profile) {
-        self.steps += 1;
-        if let Some((w, gyro, az)) = self.truth.as_mut() {
-            let noise = NoiseInForce {
-                gyro: *gyro,
-                az: *az,
-            };
-            let r = w.write(&TruthRecord::new(s, profile, noise));
-            self.keep(r);
-        }
-        if (self.steps - 1) % self.decimate != 0 {
-            return;
-        }
-        if let Some(w) = self.estimates.as_mut() {
-            let mut r = Ok(());
-            for (f, e) in est.iter().enumerate() {
-                r = r.and(w.write(&EstimateRecord::new(s.t, self.sysid, f, e, profile)));
-            }
-            self.keep(r);
-        }
-    }
-
-    fn decision(&mut self, d: &Decision) {
-        self.decisions_made += 1;
-        if self.echo {
-            use std::io::Write as _;
-            // A convenience copy, as for the monitor: a closed pipe stops the echo only.
-            if writeln!(std::io::stdout(), "{}", describe(d)).is_err() {
-                self.echo = false;
-            }
-        }
-        if let Some(w) = self.decisions.as_mut() {
-            let r = w.write(d);
-            self.keep(r);
-        }
-    }
-}
-
-/// Decision and estimate files of a replay or live monitor (any number of vehicles), with the
-/// decisions and progress lines also printed for the user.
-pub struct MonitorFiles {
-    pub decisions: Option<JsonlWriter<BufWriter<File>>>,
-    pub estimates: Option<JsonlWriter<BufWriter<File>>>,
+    /// Write every k-th step's estimates (per vehicle).
     pub decimate: u64,
     steps: std::collections::BTreeMap<u8, u64>,
     /// Print decisions to stdout and messages to stderr.
@@ -265,7 +183,7 @@ pub struct MonitorFiles {
     pub alerts: Option<crate::output::alerts::Alerts>,
 }
 
-impl MonitorFiles {
+impl Outputs {
     pub fn new(
         decisions: Option<&Path>,
         estimates: Option<&Path>,
@@ -274,6 +192,7 @@ impl MonitorFiles {
         Ok(Self {
             decisions: decisions.map(JsonlWriter::create).transpose()?,
             estimates: estimates.map(JsonlWriter::create).transpose()?,
+            truth: None,
             decimate: decimate.max(1),
             steps: Default::default(),
             echo: true,
@@ -284,14 +203,20 @@ impl MonitorFiles {
         })
     }
 
+    /// Also write the truth file (`sim --truth`).
+    pub fn with_truth(mut self, path: &Path, gyro: f64, az: f64) -> std::io::Result<Self> {
+        self.truth = Some((JsonlWriter::create(path)?, gyro, az));
+        Ok(self)
+    }
+
     fn keep(&mut self, r: std::io::Result<()>) {
         let first = self.error.is_none() && r.is_err();
         keep_first(&mut self.error, r);
-        // Live, say it at once (a full disk should not wait for ctrl-c); the dashboard, which
-        // owns the terminal, shows it at exit.
+        // Say it at once (a full disk should not wait for the end of a live run); the
+        // dashboard, which owns the terminal, shows it at exit.
         if let (true, true, Some(e)) = (first, self.echo, &self.error) {
             eprintln!(
-                "ahcmon: error writing JSON lines: {e}; the monitor goes on, the lines from now on are lost"
+                "ahcmon: error writing JSON lines: {e}; the run goes on, the lines from now on are lost"
             );
         }
     }
@@ -337,7 +262,7 @@ pub fn describe_with(d: &Decision, sysid: bool) -> String {
     s
 }
 
-impl MonitorFiles {
+impl Outputs {
     fn record(&mut self, d: &Decision) {
         if self.echo {
             use std::io::Write as _;
@@ -361,12 +286,8 @@ impl MonitorFiles {
     }
 }
 
-impl crate::pipeline::PipelineSink for MonitorFiles {
-    fn decision(&mut self, d: &Decision, _profile: &Profile) {
-        self.record(d);
-    }
-
-    fn link_event(&mut self, d: &Decision) {
+impl Sink for Outputs {
+    fn decision(&mut self, d: &Decision) {
         self.record(d);
     }
 
@@ -394,6 +315,17 @@ impl crate::pipeline::PipelineSink for MonitorFiles {
     fn message(&mut self, sysid: u8, text: &str) {
         if self.echo {
             eprintln!("sysid {sysid}: {text}");
+        }
+    }
+
+    fn truth(&mut self, s: &VehicleSample, profile: &Profile) {
+        if let Some((w, gyro, az)) = self.truth.as_mut() {
+            let noise = NoiseInForce {
+                gyro: *gyro,
+                az: *az,
+            };
+            let r = w.write(&TruthRecord::new(s, profile, noise));
+            self.keep(r);
         }
     }
 }

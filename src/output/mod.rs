@@ -1,4 +1,5 @@
-//! Sinks: the eval table and JSON, SVG plots.
+//! Where results go, behind one [`Sink`] trait: the decision and estimate JSON lines, the
+//! planner alerts, the SVG plots, the dashboard, the summary and the eval table.
 
 pub mod alerts;
 pub mod dashboard;
@@ -6,3 +7,23 @@ pub mod jsonl;
 pub mod summary;
 pub mod svg;
 pub mod table;
+
+use crate::diagnose::vehicle::Decision;
+use crate::estimate::vehicle::AhcEstimate;
+use crate::sim::vehicle::VehicleSample;
+use crate::telemetry::Profile;
+
+/// What a run hands its results to: the pipeline (replay, the live monitor) and `eval` call
+/// the same methods ([`crate::pipeline::Core::step`]). Every method but `decision` may be
+/// ignored.
+pub trait Sink {
+    /// A decision: an actuator's fault, its change or end, or a monitor event (link lost or
+    /// restored, a filter reset).
+    fn decision(&mut self, d: &Decision);
+    /// Every filter step: both filters' estimates per actuator.
+    fn estimates(&mut self, _t: f64, _sysid: u8, _est: &[&[AhcEstimate]; 2], _profile: &Profile) {}
+    /// Progress and warnings, one line each.
+    fn message(&mut self, _sysid: u8, _text: &str) {}
+    /// The simulator's truth of the sample about to be estimated (`sim`, `eval`).
+    fn truth(&mut self, _s: &VehicleSample, _profile: &Profile) {}
+}
