@@ -1,6 +1,9 @@
 //! One step of each filter on the paper model (n = 5), and the whole 2000-step paper run of all
 //! five filters with the simulator (the paper's Table 2 took 31 s for the five).
 
+// A developer tool: a failed unwrap ends it with the reason.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::estimate::{
     AdaptationParams, Esmf, EsmfParams, KfUkf, MitEsmf, MitUkf, SlaveKfParams, Ukf, UkfParams,
 };

@@ -22,6 +22,9 @@
 //! `cargo run --release --example esmf_floor -- [SCENARIO] [--seeds N]`
 //! (default `paper-fig9-uniform-step`, 30 seeds).
 
+// A developer tool: a failed unwrap ends it with the reason.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::estimate::{AdaptationParams, Esmf, EsmfParams, MitEsmf};
 use ahcmon::eval::bank::{BankNoise, set_p0, x0};
 use ahcmon::model::Model;

@@ -31,6 +31,9 @@
 //!
 //! `cargo run --release --example oracle_bound -- hexa-x-motor3-loe --seeds 10`
 
+// A developer tool: a failed unwrap ends it with the reason.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::eval::vehicle::sim_config;
 use ahcmon::sim::vehicle::VehicleSim;
 use anyhow::{Context, Result, bail};

@@ -12,13 +12,21 @@ use std::path::PathBuf;
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// More diagnostics on stderr: -v the pipeline's stages, -vv every detail (RUST_LOG
+    /// also sets them, e.g. RUST_LOG=ahcmon::pipeline=debug).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count, conflicts_with = "quiet", display_order = 900)]
+    pub verbose: u8,
+    /// Only results: no progress, notes or warnings on stderr (errors still are).
+    #[arg(short, long, global = true, display_order = 900)]
+    pub quiet: bool,
 }
 
 #[derive(Subcommand)]
 pub enum Command {
     /// Run scenarios through the simulator and all five filters (UKF, KF-UKF, MIT-UKF, ESMF,
     /// MIT-ESMF) and score them against the truth: detection delay, settling time, RMSE,
-    /// truth-in-bounds, false decisions, µs per step.
+    /// truth-in-bounds, false decisions, µs per step. With --decisions / --estimates (one
+    /// vehicle scenario), also the JSON lines of its first seed.
     Eval(EvalArgs),
     /// Calibrate each vehicle's decision threshold on healthy Monte-Carlo flights: the smallest
     /// threshold at which no healthy flight would raise a fault, times a margin. Flown with
@@ -68,15 +76,9 @@ pub struct EvalArgs {
     /// Run each scenario with this many seeds (the scenario's seed, +1, +2, ...).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
     pub seeds: u64,
-    /// Write the decisions JSONL of the first seed (one vehicle scenario only).
-    #[arg(long, value_name = "FILE")]
-    pub decisions: Option<PathBuf>,
-    /// Write the estimates JSONL of the first seed (one vehicle scenario only).
-    #[arg(long, value_name = "FILE")]
-    pub estimates: Option<PathBuf>,
-    /// Write every k-th step's estimates.
-    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
-    pub decimate: u64,
+    // --decisions / --estimates: of the first seed, one vehicle scenario only.
+    #[command(flatten)]
+    pub output: OutputArgs,
 }
 
 #[derive(clap::Args)]
@@ -99,12 +101,9 @@ pub struct SimArgs {
     /// Truth JSONL: per step, every actuator's true gamma and delta and the noise in force.
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
-    /// Decisions JSONL of the monitor running on the flight (one object a line).
-    #[arg(long, value_name = "FILE")]
-    pub decisions: Option<PathBuf>,
-    /// Estimates JSONL (both filters, every actuator, every step).
-    #[arg(long, value_name = "FILE")]
-    pub estimates: Option<PathBuf>,
+    // The JSON lines of the monitor's filters and diagnosis running on the flight.
+    #[command(flatten)]
+    pub output: OutputArgs,
     /// Seed (default: the scenario's).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -175,12 +174,8 @@ pub struct DemoArgs {
     /// Another vehicle scenario instead of the built-in one (heli-demo).
     #[arg(long, value_name = "FILE|NAME")]
     pub scenario: Option<String>,
-    /// Decisions JSONL (one object a line).
-    #[arg(long, value_name = "FILE")]
-    pub decisions: Option<PathBuf>,
-    /// Estimates JSONL (both filters, every actuator, every step).
-    #[arg(long, value_name = "FILE")]
-    pub estimates: Option<PathBuf>,
+    #[command(flatten)]
+    pub output: OutputArgs,
     /// Also send the alerts to a planner (see `monitor --alerts`).
     #[arg(long, value_name = "CONN")]
     pub alerts: Option<String>,
@@ -247,20 +242,27 @@ pub struct RunArgs {
     /// plane) or TOML file. Default: chosen from the vehicle's HEARTBEAT and parameters.
     #[arg(long, value_name = "NAME|FILE")]
     pub profile: Option<String>,
-    /// Decisions JSONL (one object a line).
-    #[arg(long, value_name = "FILE")]
-    pub decisions: Option<PathBuf>,
-    /// Estimates JSONL (both filters, every actuator, every step).
-    #[arg(long, value_name = "FILE")]
-    pub estimates: Option<PathBuf>,
-    /// Write every k-th step's estimates.
-    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
-    pub decimate: u64,
+    #[command(flatten)]
+    pub output: OutputArgs,
     /// End the healthy calibration stretch at this vehicle time (s since boot, as in the
     /// decisions' `t`); default: 20 s from when the vehicle is airborne and settled (3 s
     /// after take-off).
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     pub calibrate_until: Option<f64>,
+}
+
+/// The JSON-lines files of a run (`replay`, `monitor`, `demo`, `sim`, `eval`).
+#[derive(clap::Args, Debug, Default)]
+pub struct OutputArgs {
+    /// Decisions JSONL (one object a line, flushed per line).
+    #[arg(long, value_name = "FILE")]
+    pub decisions: Option<PathBuf>,
+    /// Estimates JSONL (both filters, every actuator; every step, or see --decimate).
+    #[arg(long, value_name = "FILE")]
+    pub estimates: Option<PathBuf>,
+    /// Write every k-th step's estimates.
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub decimate: u64,
 }
 
 /// `sim --autopilot`.

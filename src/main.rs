@@ -10,6 +10,7 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    app::log::init(cli.verbose, cli.quiet);
     // replay and eval run on this pool (two filters of a vehicle on two cores): give its
     // workers the main thread's stack size, the filter structs are moved by value.
     let _ = rayon::ThreadPoolBuilder::new()

@@ -61,10 +61,10 @@ impl Monitor {
         let Some(vehicle) = self.assembler.vehicles.get_mut(&sysid) else {
             return;
         };
-        let pipeline = self
-            .pipelines
-            .entry(sysid)
-            .or_insert_with(|| VehiclePipeline::new(sysid, self.cfg.clone()));
+        let pipeline = self.pipelines.entry(sysid).or_insert_with(|| {
+            tracing::debug!("sysid {sysid}: a new vehicle, with its own pipeline");
+            VehiclePipeline::new(sysid, self.cfg.clone())
+        });
         for sample in &self.samples {
             if std::mem::take(&mut vehicle.rebooted) {
                 pipeline.reset(sample.t, sink);

@@ -1,5 +1,8 @@
 //! The binary on bad input: a one-line error, exit code 2, no panic.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 mod common;
 
 use std::process::Command;

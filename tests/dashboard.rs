@@ -2,6 +2,9 @@
 //! scenario's MAVLink stream (written by `ahcmon sim --tlog`) fed through the monitor up to a
 //! chosen time. Healthy, fault, excitation low and link lost; 80x24 and 200x60.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 mod common;
 
 use ahcmon::diagnose::vehicle::{Decision, Event};

@@ -2,6 +2,9 @@
 //! measurement set lies inside the updated set (Monte Carlo, ≥ 10 000 accepted points), and
 //! the linearisation-error box of the bilinear terms is exact.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::estimate::{Esmf, EsmfParams, remainder_box};
 use ahcmon::eval::bank::{BankNoise, set_p0, x0};
 use ahcmon::model::{Model, PaperHeli};

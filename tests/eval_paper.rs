@@ -1,6 +1,9 @@
 //! `eval` reproduces the paper's findings as numbers (truth from the simulator, one filter
 //! configuration for every scenario).
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::eval::{Row, aggregate, run_scenario};
 use ahcmon::scenario;
 

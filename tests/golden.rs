@@ -9,6 +9,9 @@
 //! external logs in `../shared/data`) through `tests/golden/recompute`, which with `--update`
 //! rewrites the digests file.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -1,6 +1,9 @@
 //! The MIT gradients against central finite differences: one full step, and the recursive
 //! sensitivity over 50 steps, for every q_i including the AHC entries.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::estimate::{
     Esmf, EsmfParams, Sensitivity, ShapeSensitivity, ShapeStep, Ukf, UkfParams, remainder_box,
     shape_step,

@@ -2,6 +2,9 @@
 //! `ahcmon sim --out` speaking like an autopilot, `ahcmon monitor` listening; tlogs written by
 //! `sim --tlog` read back by pymavlink; corrupted real logs replayed.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 mod common;
 
 use serde_json::Value;

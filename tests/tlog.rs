@@ -1,6 +1,9 @@
 //! tlog reading on real logs (frame counts against pymavlink's, SOURCES.md) and on corrupted
 //! copies: everything dropped is counted, nothing panics, the good frames still come through.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 use ahcmon::link::{TlogReader, TlogWriter};
 use ahcmon::protocol::MavMessage;
 use std::collections::BTreeMap;

@@ -1,5 +1,8 @@
 //! Vehicle profiles, simulators, diagnosis, calibration and the JSONL files (issue 4).
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 mod common;
 
 use ahcmon::eval::run_scenario;

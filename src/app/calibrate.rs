@@ -37,9 +37,7 @@ fn calibrate(
     let mut reader = TlogReader::open(file).map_err(input_error)?;
     let args = RunArgs {
         profile: profile.map(str::to_string),
-        decisions: None,
-        estimates: None,
-        decimate: 1,
+        output: Default::default(),
         calibrate_until: Some(until),
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
@@ -85,8 +83,8 @@ fn calibrate(
             .map(|id| id.to_string())
             .collect();
         if !others.is_empty() {
-            eprintln!(
-                "the log also holds sysid {}: calibrating sysid {chosen}, the first to complete its stretch (--sysid chooses)",
+            tracing::warn!(
+                "warning: the log also holds sysid {}: calibrating sysid {chosen}, the first to complete its stretch (--sysid chooses)",
                 others.join(", ")
             );
         }

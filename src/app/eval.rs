@@ -1,6 +1,6 @@
 //! `ahcmon eval` and the JSONL files of one vehicle run (`eval --decisions`, `sim`).
 
-use super::{UsageError, check_outputs, file_input};
+use super::{Progress, UsageError, file_input};
 use crate::cli::EvalArgs;
 use ahcmon::eval::vehicle::run_vehicle_scenario;
 use ahcmon::eval::{Run, aggregate, run_scenario};
@@ -8,7 +8,6 @@ use ahcmon::output::jsonl::Outputs;
 use ahcmon::output::{svg, table};
 use ahcmon::scenario::{self, NamedScenario};
 use anyhow::Context;
-use std::io::IsTerminal;
 use std::path::PathBuf;
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
@@ -17,11 +16,9 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         json,
         plot,
         seeds,
-        decisions,
-        estimates,
-        decimate,
+        output,
     } = a;
-    if decisions.is_some() || estimates.is_some() {
+    if output.any() {
         let [one] = scenarios.as_slice() else {
             return Err(
                 UsageError("--decisions / --estimates take exactly one scenario".into()).into(),
@@ -29,15 +26,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         };
         let named = scenario::resolve(one)?;
         let input = file_input(one, scenario::BUILTIN);
-        check_outputs(
-            input.as_slice(),
-            &[
-                ("--decisions", decisions.as_deref()),
-                ("--estimates", estimates.as_deref()),
-            ],
-        )?;
-        let files = Outputs::new(decisions.as_deref(), estimates.as_deref(), decimate)
-            .context("cannot create output file")?;
+        let files = output.create(input.as_slice(), &[])?;
         // The files come from the first seed; the table (all seeds) follows as usual.
         let written = run_with_files(&named, named.scenario.seed, files, false)?;
         rayon::scope(|_| eval(scenarios, json, plot, seeds))?;
@@ -120,14 +109,12 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create plot directory {}", dir.display()))?;
     }
-    let progress = std::io::stderr().is_terminal();
+    let mut progress = Progress::new(true);
     let mut rows = vec![];
     for named in &list {
         let mut runs: Vec<Run> = vec![];
         for i in 0..seeds {
-            if progress {
-                eprint!("\reval: {} seed {}/{}   ", named.name, i + 1, seeds);
-            }
+            progress.show(&format!("eval: {} seed {}/{}", named.name, i + 1, seeds));
             let keep = plot.is_some() && i == 0;
             runs.push(run_scenario(named, named.scenario.seed + i, keep)?);
         }
@@ -138,9 +125,7 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
         }
         rows.extend(aggregate(&runs));
     }
-    if progress {
-        eprint!("\r{:60}\r", "");
-    }
+    progress.clear();
     if json {
         outln!("{}", table::to_json(&rows));
     } else {

@@ -49,45 +49,9 @@ pub struct LiveCounters {
     pub link: FrameCounters,
     /// Frames dropped because the estimating side fell behind (channel full).
     pub backpressure_drops: u64,
-    /// The connection's notes (see [`Received::Note`]) that the dashboard kept
-    /// from being said: the caller says them once the terminal is restored. The first and the
-    /// last `KEPT_NOTES` only (a flapping peer says two a second for as long as it runs).
-    pub unsaid_notes: Vec<String>,
-    unsaid_last: std::collections::VecDeque<String>,
-    unsaid_skipped: u64,
     /// Our own alert frames (component `ALERT_COMPID`) that came back in, ignored: a forwarder
     /// such as MAVProxy sends what one link gives it to its other links.
     pub own_echo: u64,
-}
-
-/// How many of the first and of the last unsaid notes are kept.
-const KEPT_NOTES: usize = 20;
-
-impl LiveCounters {
-    fn keep_note(&mut self, note: String) {
-        if self.unsaid_notes.len() < KEPT_NOTES {
-            self.unsaid_notes.push(note);
-            return;
-        }
-        self.unsaid_last.push_back(note);
-        if self.unsaid_last.len() > KEPT_NOTES {
-            self.unsaid_last.pop_front();
-            self.unsaid_skipped += 1;
-        }
-    }
-
-    /// The notes to say after the dashboard: the first, how many were left out, the last.
-    pub fn notes_to_say(&self) -> Vec<String> {
-        let mut out = self.unsaid_notes.clone();
-        if self.unsaid_skipped > 0 {
-            out.push(format!(
-                "({} more notes like these, not repeated)",
-                self.unsaid_skipped
-            ));
-        }
-        out.extend(self.unsaid_last.iter().cloned());
-        out
-    }
 }
 
 /// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
@@ -109,8 +73,6 @@ pub async fn run(
     let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<LiveCounters, ConnError>>();
     // Frames for the vehicle link (only SET_MESSAGE_INTERVAL, only with --request-rates).
     let (vehicle_tx, mut vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
-    // Headless, the connection's state changes are said (the dashboard's footer shows the link).
-    let say_notes = ui.is_none();
     let spec = link.spec.to_string();
     let reader = tokio::spawn(async move {
         let mut drops = 0u64;
@@ -122,14 +84,8 @@ pub async fn run(
                     }
                 }
                 r = link.recv_or_note() => match r {
-                    Ok(Received::Note(note)) => {
-                        let note = format!("{spec}: {note}");
-                        if say_notes {
-                            eprintln!("monitor: {note}");
-                        } else if let Ok(mut c) = reader_counters.lock() {
-                            c.keep_note(note);
-                        }
-                    }
+                    // (Under the dashboard, held until the terminal is restored.)
+                    Ok(Received::Note(note)) => tracing::info!("monitor: {spec}: {note}"),
                     Ok(Received::Frame(frame)) => {
                         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                             drops += 1;
@@ -238,7 +194,7 @@ pub async fn run(
                     silence_told = true;
                     // Only decoded frames reach here: bytes that never make a frame (a wrong
                     // baud rate) look the same, and the summary counts them.
-                    eprintln!(
+                    tracing::warn!(
                         "monitor: no MAVLink frame in {} s; check that the vehicle or ground station sends to this address (e.g. MAVProxy --out udp:HOST:PORT for udpin:0.0.0.0:PORT), and a serial link's baud rate",
                         NO_DATA_HINT.as_secs()
                     );
@@ -378,26 +334,6 @@ mod tests {
             msg_id: mavlink_core::Message::message_id(&msg),
             msg,
         }
-    }
-
-    /// Under the dashboard a flapping peer's notes are kept first and last, the rest counted.
-    #[test]
-    fn unsaid_notes_keep_the_first_and_the_last() {
-        let mut c = LiveCounters::default();
-        for k in 0..1000 {
-            c.keep_note(format!("note {k}"));
-        }
-        let said = c.notes_to_say();
-        assert_eq!(said.len(), 2 * KEPT_NOTES + 1, "{said:?}");
-        assert_eq!(said[0], "note 0");
-        assert_eq!(
-            said[KEPT_NOTES],
-            "(960 more notes like these, not repeated)"
-        );
-        assert_eq!(said.last().map(String::as_str), Some("note 999"));
-        let mut few = LiveCounters::default();
-        few.keep_note("only".into());
-        assert_eq!(few.notes_to_say(), vec!["only".to_string()]);
     }
 
     #[test]

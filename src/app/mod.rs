@@ -2,7 +2,7 @@
 //! results reach stdout, the checks on outputs before anything is created, and the errors
 //! that are the user's input (exit code 2) rather than ours (exit code 1).
 
-use crate::cli::RunArgs;
+use crate::cli::{OutputArgs, RunArgs};
 use ahcmon::eval::EvalError;
 use ahcmon::link::ConnError;
 use ahcmon::output::jsonl::Outputs;
@@ -38,6 +38,7 @@ pub mod calibrate;
 pub mod eval;
 mod fly;
 mod live;
+pub mod log;
 pub mod monitor;
 mod rates;
 pub mod replay;
@@ -68,18 +69,39 @@ impl RunArgs {
         inputs: &[&Path],
         more: &[(&str, Option<&Path>)],
     ) -> anyhow::Result<Outputs> {
-        let mut outputs = vec![
-            ("--decisions", self.decisions.as_deref()),
-            ("--estimates", self.estimates.as_deref()),
-        ];
-        outputs.extend_from_slice(more);
         let mut inputs = inputs.to_vec();
         inputs.extend(
             self.profile
                 .as_deref()
                 .and_then(|p| file_input(p, ahcmon::telemetry::profile::BUILTIN)),
         );
-        check_outputs(&inputs, &outputs)?;
+        self.output.create(&inputs, more)
+    }
+}
+
+impl OutputArgs {
+    /// The flags and the files they name, for [`check_outputs`].
+    pub fn flags(&self) -> [(&'static str, Option<&Path>); 2] {
+        [
+            ("--decisions", self.decisions.as_deref()),
+            ("--estimates", self.estimates.as_deref()),
+        ]
+    }
+
+    pub fn any(&self) -> bool {
+        self.decisions.is_some() || self.estimates.is_some()
+    }
+
+    /// The files, created only once no output (these and `more`) names one of `inputs` or
+    /// another output.
+    pub fn create(
+        &self,
+        inputs: &[&Path],
+        more: &[(&str, Option<&Path>)],
+    ) -> anyhow::Result<Outputs> {
+        let mut outputs = self.flags().to_vec();
+        outputs.extend_from_slice(more);
+        check_outputs(inputs, &outputs)?;
         Outputs::new(
             self.decisions.as_deref(),
             self.estimates.as_deref(),
@@ -201,7 +223,7 @@ pub(crate) fn warn_fault_in_calibration(who: &str, named: &NamedScenario) {
     if let Some(f) = named.scenario.first_fault()
         && f.t < learned_until
     {
-        eprintln!(
+        tracing::warn!(
             "{who}: warning: the fault on {} at {} s into the flight falls in the first {learned_until} s, which a monitor with default settings calibrates on as healthy: it would learn the fault as the vehicle's normal (the `-live` scenarios start their faults later{})",
             f.actuator,
             f.t,
@@ -232,3 +254,37 @@ pub(crate) struct InputFileError {
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
 pub(crate) struct UsageError(pub String);
+
+/// A one-line progress display on stderr, redrawn in place: only on a terminal, and not
+/// with `-q`.
+pub(crate) struct Progress {
+    on: bool,
+    width: usize,
+}
+
+impl Progress {
+    /// `wanted`: the caller shows no other progress (a dashboard).
+    pub(crate) fn new(wanted: bool) -> Self {
+        use std::io::IsTerminal;
+        Self {
+            on: wanted && std::io::stderr().is_terminal() && log::progress_enabled(),
+            width: 0,
+        }
+    }
+
+    pub(crate) fn show(&mut self, text: &str) {
+        if self.on {
+            let pad = self.width.saturating_sub(text.chars().count());
+            self.width = self.width.max(text.chars().count());
+            eprint!("\r{text}{:pad$}", "");
+        }
+    }
+
+    /// Wipe the line, before results or other lines are written.
+    pub(crate) fn clear(&mut self) {
+        if self.on && self.width > 0 {
+            eprint!("\r{:w$}\r", "", w = self.width);
+            self.width = 0;
+        }
+    }
+}

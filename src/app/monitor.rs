@@ -41,8 +41,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
     let DemoArgs {
         headless,
         scenario: name,
-        decisions,
-        estimates,
+        output,
         alerts,
         speed,
     } = a;
@@ -51,10 +50,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         name.as_deref()
             .and_then(|n| file_input(n, scenario::BUILTIN))
             .as_slice(),
-        &[
-            ("--decisions", decisions.as_deref()),
-            ("--estimates", estimates.as_deref()),
-        ],
+        &output.flags(),
     )?;
     if named.scenario.is_paper() {
         return Err(UsageError(format!(
@@ -64,17 +60,15 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         .into());
     }
     let speed = in_range("--speed", speed, SPEED_RANGE.0, SPEED_RANGE.1)?;
-    eprintln!("demo: {}", named.scenario.description);
-    eprintln!(
+    tracing::info!("demo: {}", named.scenario.description);
+    tracing::info!(
         "demo: on the autopilot's clock, which the monitor shows: {}",
         ahcmon::scenario::script_on_vehicle_clock(&named.scenario)
     );
     warn_fault_in_calibration("demo", &named);
     let args = RunArgs {
         profile: None,
-        decisions,
-        estimates,
-        decimate: 1,
+        output,
         calibrate_until: None,
     };
     // Headless, the monitor stops once the simulated flight has ended; with the
@@ -170,15 +164,15 @@ fn monitor(
             ConnSpec::Serial(..) => "reading",
         };
         match link.not_connected() {
-            Some(why) => eprintln!("monitor: {spec}: {why}; retrying every second"),
-            None => eprintln!(
+            Some(why) => tracing::warn!("monitor: {spec}: {why}; retrying every second"),
+            None => tracing::info!(
                 "monitor: {verb} {spec}{}",
                 local.map_or(String::new(), |a| format!(" (local {a})"))
             ),
         }
         let alert_link = match &alerts {
             Some(a) => {
-                eprintln!("monitor: alerts to {a} (sysid of the vehicle, component 191)");
+                tracing::info!("monitor: alerts to {a} (sysid of the vehicle, component 191)");
                 Some(Link::open(a.clone()).await?)
             }
             None => None,
@@ -214,6 +208,8 @@ fn monitor(
             }
             _ => None,
         };
+        // Declared before the dashboard: dropped after it, once the terminal is restored.
+        let held = dashboard.then(super::log::hold);
         let mut ui = if dashboard {
             files.echo = false;
             // The address actually bound (the demo's udpin:127.0.0.1:0 showed port 0).
@@ -241,12 +237,10 @@ fn monitor(
             opts,
         )
         .await;
-        // Restore the terminal before anything is printed.
+        // Restore the terminal before anything is printed, then say what was held.
         drop(ui);
+        drop(held);
         let counters = counters?;
-        for note in &counters.notes_to_say() {
-            eprintln!("monitor: {note}");
-        }
         if let Some(h) = sim {
             // Quit before the script ended: stop the vehicle; else report how it ended.
             if h.is_finished() {
@@ -266,7 +260,7 @@ fn monitor(
         Ok(c) => c,
         Err(e) => {
             if let Some(w) = &write_error {
-                eprintln!("ahcmon: error: {w:#}");
+                tracing::error!("ahcmon: error: {w:#}");
             }
             return Err(e);
         }

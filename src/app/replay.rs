@@ -1,7 +1,7 @@
 //! `ahcmon replay`: a telemetry log through the pipeline, as fast as the CPU goes or paced,
 //! with the dashboard or headless, and the summary at the end.
 
-use super::{InputFileError, SPEED_RANGE, UsageError, in_range};
+use super::{InputFileError, Progress, SPEED_RANGE, UsageError, in_range};
 use crate::cli::{ReplayArgs, RunArgs};
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
@@ -50,7 +50,10 @@ fn replay(
         files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
     }
     // The dashboard at a replay speed a person can follow; --fast (the default) is headless.
-    let mut ui = if !headless && std::io::stdout().is_terminal() {
+    let dashboard = !headless && std::io::stdout().is_terminal();
+    // Declared before the dashboard: dropped after it, once the terminal is restored.
+    let held = dashboard.then(super::log::hold);
+    let mut ui = if dashboard {
         files.echo = false;
         Some(
             // The file's name: its whole path left no room for the counters.
@@ -65,7 +68,7 @@ fn replay(
     } else {
         None
     };
-    let progress = ui.is_none() && std::io::stderr().is_terminal();
+    let mut progress = Progress::new(ui.is_none());
     let started = std::time::Instant::now();
     // Pacing for --speed: a log timestamp and the moment it was replayed.
     let mut pace: Option<(u64, std::time::Instant)> = None;
@@ -109,11 +112,14 @@ fn replay(
         if let Some(ui) = ui.as_mut() {
             ui.history.live.sample(&monitor);
         }
-        if progress && size > 0 {
-            let pct = (reader.position() * 100 / size) as usize;
+        if let Some(pct) = (reader.position() * 100).checked_div(size) {
+            let pct = pct as usize;
             if pct != shown {
                 shown = pct;
-                eprint!("\rreplay: {pct:3}% [{:<40}]", "#".repeat(pct * 40 / 100));
+                progress.show(&format!(
+                    "replay: {pct:3}% [{:<40}]",
+                    "#".repeat(pct * 40 / 100)
+                ));
             }
         }
     }
@@ -139,9 +145,8 @@ fn replay(
         }
     }
     drop(ui);
-    if progress {
-        eprint!("\r{:60}\r", "");
-    }
+    drop(held);
+    progress.clear();
     // Reported after the plot and the summary, which do not depend on the files.
     let write_error = files
         .error
@@ -151,7 +156,7 @@ fn replay(
         let title = format!("ahcmon replay {}", file.display());
         std::fs::write(p, rec.render(&title))
             .with_context(|| format!("cannot write {}", p.display()))?;
-        eprintln!("plot written to {}", p.display());
+        tracing::info!("plot written to {}", p.display());
     }
     out!(
         "{}",

@@ -18,8 +18,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
     let SimArgs {
         scenario: name,
         truth,
-        decisions,
-        estimates,
+        output,
         seed,
         out,
         tlog,
@@ -28,17 +27,18 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         autopilot,
     } = a;
     let named = scenario::resolve(&name)?;
+    let [decisions, estimates] = output.flags();
     check_outputs(
         file_input(&name, scenario::BUILTIN).as_slice(),
         &[
             ("--truth", truth.as_deref()),
-            ("--decisions", decisions.as_deref()),
-            ("--estimates", estimates.as_deref()),
+            decisions,
+            estimates,
             ("--tlog", tlog.as_deref()),
         ],
     )?;
     if out.is_some() || tlog.is_some() {
-        if decisions.is_some() || estimates.is_some() {
+        if output.any() {
             return Err(UsageError(
                 "--decisions / --estimates come from the in-process filters; with --out / --tlog run `ahcmon monitor` or `ahcmon replay` on the stream instead".into(),
             )
@@ -59,8 +59,12 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         return sim_mavlink(&named, opts);
     }
     let (cfg, _) = sim_config(&named, 0)?;
-    let mut files = Outputs::new(decisions.as_deref(), estimates.as_deref(), 1)
-        .context("cannot create output file")?;
+    let mut files = Outputs::new(
+        output.decisions.as_deref(),
+        output.estimates.as_deref(),
+        output.decimate,
+    )
+    .context("cannot create output file")?;
     if let Some(path) = &truth {
         files = files
             .with_truth(path, cfg.gyro_noise, cfg.az_noise)
@@ -138,7 +142,7 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
                 _ => None,
             };
             if let Some(w) = waiting {
-                eprintln!("sim: {s}: {w}; frames are not sent until then");
+                tracing::info!("sim: {s}: {w}; frames are not sent until then");
             }
         }
         let flight = fly(named, &opts, link.as_mut(), tlog.as_mut(), truth.as_mut());

@@ -3,7 +3,6 @@
 
 use crate::cli::ThresholdsArgs;
 use ahcmon::scenario::{self, NamedScenario};
-use std::io::IsTerminal;
 
 pub fn run(a: ThresholdsArgs) -> anyhow::Result<()> {
     let ThresholdsArgs {
@@ -28,17 +27,13 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
             .collect::<Result<_, _>>()?
     };
     let seed_list: Vec<u64> = (0..seeds).map(|i| CALIBRATION_FIRST_SEED + i).collect();
-    let progress = std::io::stderr().is_terminal();
+    let mut progress = super::Progress::new(true);
     let mut out = vec![];
     for named in &list {
-        if progress {
-            eprint!("\rthresholds: {} ({} flights)   ", named.name, seeds);
-        }
+        progress.show(&format!("thresholds: {} ({} flights)", named.name, seeds));
         out.push(calibrate_threshold(named, &seed_list)?);
     }
-    if progress {
-        eprint!("\r{:60}\r", "");
-    }
+    progress.clear();
     if json {
         outln!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());

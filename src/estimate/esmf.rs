@@ -11,7 +11,7 @@ use super::linalg::{
     SparseRows, cholesky_jitter, identity_tail_start, mirror_upper, sandwich_walk_in_place,
     sym_top_eigen, symmetrize,
 };
-use super::{Estimator, EstimatorError, check_commands, check_inputs};
+use super::{EstimatorError, check_commands, check_inputs};
 use crate::model::{BilinearTerm, Model};
 use nalgebra::{SMatrix, SVector};
 
@@ -617,26 +617,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for Esmf<Mo, N, M> {
-    fn name(&self) -> &'static str {
-        "esmf"
-    }
-    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
-        self.try_step(u, y).map(|_| ())
-    }
-    fn state(&self) -> &SVector<f64, N> {
-        &self.x
-    }
-    fn bounds(&self, i: usize) -> (f64, f64) {
-        self.projection(i)
-    }
-    fn process_noise(&self) -> &SVector<f64, N> {
-        &self.process_noise
-    }
-    fn innovation(&self) -> &SVector<f64, M> {
-        &self.innovation
-    }
-    fn contradicted(&self) -> bool {
-        self.outcome.contradicted()
-    }
-}
+impl_estimator!(set Esmf, "esmf");

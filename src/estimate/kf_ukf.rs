@@ -7,7 +7,7 @@
 
 use super::MitUkf;
 use super::mit::{AdaptationParams, InnovationWindow, Sensitivity};
-use super::{Estimator, EstimatorError, Ukf, UkfParams, check_inputs};
+use super::{EstimatorError, Ukf, UkfParams, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
 
@@ -118,28 +118,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, 
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M>
-    for KfUkf<Mo, N, M, S>
-{
-    fn name(&self) -> &'static str {
-        "kf-ukf"
-    }
-    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
-        self.try_step(u, y)
-    }
-    fn state(&self) -> &SVector<f64, N> {
-        &self.ukf.x
-    }
-    fn bounds(&self, i: usize) -> (f64, f64) {
-        self.ukf.three_sigma(i)
-    }
-    fn process_noise(&self) -> &SVector<f64, N> {
-        &self.ukf.process_noise
-    }
-    fn innovation(&self) -> &SVector<f64, M> {
-        &self.ukf.innovation
-    }
-}
+impl_estimator!(kalman KfUkf, "kf-ukf", ukf);
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, N, M, S> {
     /// One linear KF measurement update of the slave filter on q, then projection.

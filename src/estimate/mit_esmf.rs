@@ -14,7 +14,7 @@
 
 use super::esmf::{EsmfOutcome, ShapeStep, remainder_dim, scale_block};
 use super::mit::{AdaptationParams, StepSchedule, log_step};
-use super::{Esmf, EsmfParams, Estimator, EstimatorError};
+use super::{Esmf, EsmfParams, EstimatorError};
 use crate::model::{BilinearTerm, Model};
 use nalgebra::{SMatrix, SVector};
 
@@ -381,26 +381,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize> Estimator<N, M> for MitEsmf<Mo, N, M> {
-    fn name(&self) -> &'static str {
-        "mit-esmf"
-    }
-    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
-        self.try_step(u, y).map(|_| ())
-    }
-    fn state(&self) -> &SVector<f64, N> {
-        &self.esmf.x
-    }
-    fn bounds(&self, i: usize) -> (f64, f64) {
-        self.esmf.projection(i)
-    }
-    fn process_noise(&self) -> &SVector<f64, N> {
-        &self.esmf.process_noise
-    }
-    fn innovation(&self) -> &SVector<f64, M> {
-        &self.esmf.innovation
-    }
-    fn contradicted(&self) -> bool {
-        self.esmf.outcome.contradicted()
-    }
-}
+impl_estimator!(set MitEsmf, "mit-esmf", esmf);

@@ -16,7 +16,7 @@ use super::mit::{
     AdaptationParams, GainTransition, InnovationWindow, Sandwich, Sensitivity, StepSchedule,
     gn_step, gradient_from, h_x_ht,
 };
-use super::{Estimator, EstimatorError, Ukf, UkfParams, check_commands, check_inputs};
+use super::{EstimatorError, Ukf, UkfParams, check_commands, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
 
@@ -303,25 +303,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M>
-    for MitUkf<Mo, N, M, S>
-{
-    fn name(&self) -> &'static str {
-        "mit-ukf"
-    }
-    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
-        self.try_step(u, y)
-    }
-    fn state(&self) -> &SVector<f64, N> {
-        &self.ukf.x
-    }
-    fn bounds(&self, i: usize) -> (f64, f64) {
-        self.ukf.three_sigma(i)
-    }
-    fn process_noise(&self) -> &SVector<f64, N> {
-        &self.ukf.process_noise
-    }
-    fn innovation(&self) -> &SVector<f64, M> {
-        &self.ukf.innovation
-    }
-}
+impl_estimator!(kalman MitUkf, "mit-ukf", ukf);

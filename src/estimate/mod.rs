@@ -2,6 +2,72 @@
 //! KF-UKF, ESMF and MIT-ESMF. Each is a struct with an allocation-free `step(u, y)` over
 //! fixed-size nalgebra types.
 
+/// Implements [`Estimator`] for one of the five filters from where its state lives: the
+/// filter itself, or its inner filter (`ukf` for the MIT-UKF and KF-UKF, `esmf` for the
+/// MIT-ESMF). Kalman filters bound a coordinate by ±3σ, set filters by the set's projection
+/// and say when the data contradicted the set. Every filter's own step is `try_step`.
+macro_rules! impl_estimator {
+    (kalman $ty:ident, $name:literal $(, $inner:ident)?) => {
+        impl<Mo: crate::model::Model<N, M>, const N: usize, const M: usize, const S: usize>
+            crate::estimate::Estimator<N, M> for $ty<Mo, N, M, S>
+        {
+            fn name(&self) -> &'static str {
+                $name
+            }
+            fn step(
+                &mut self,
+                u: &[f64],
+                y: &nalgebra::SVector<f64, M>,
+            ) -> Result<(), crate::estimate::EstimatorError> {
+                self.try_step(u, y)
+            }
+            fn state(&self) -> &nalgebra::SVector<f64, N> {
+                &self$(.$inner)?.x
+            }
+            fn bounds(&self, i: usize) -> (f64, f64) {
+                self$(.$inner)?.three_sigma(i)
+            }
+            fn process_noise(&self) -> &nalgebra::SVector<f64, N> {
+                &self$(.$inner)?.process_noise
+            }
+            fn innovation(&self) -> &nalgebra::SVector<f64, M> {
+                &self$(.$inner)?.innovation
+            }
+        }
+    };
+    (set $ty:ident, $name:literal $(, $inner:ident)?) => {
+        impl<Mo: crate::model::Model<N, M>, const N: usize, const M: usize>
+            crate::estimate::Estimator<N, M> for $ty<Mo, N, M>
+        {
+            fn name(&self) -> &'static str {
+                $name
+            }
+            fn step(
+                &mut self,
+                u: &[f64],
+                y: &nalgebra::SVector<f64, M>,
+            ) -> Result<(), crate::estimate::EstimatorError> {
+                self.try_step(u, y).map(|_| ())
+            }
+            fn state(&self) -> &nalgebra::SVector<f64, N> {
+                &self$(.$inner)?.x
+            }
+            fn bounds(&self, i: usize) -> (f64, f64) {
+                self$(.$inner)?.projection(i)
+            }
+            fn process_noise(&self) -> &nalgebra::SVector<f64, N> {
+                &self$(.$inner)?.process_noise
+            }
+            fn innovation(&self) -> &nalgebra::SVector<f64, M> {
+                &self$(.$inner)?.innovation
+            }
+            fn contradicted(&self) -> bool {
+                self$(.$inner)?.outcome.contradicted()
+            }
+        }
+    };
+}
+
 mod esmf;
 mod kf_ukf;
 pub mod linalg;

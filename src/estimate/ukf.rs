@@ -4,7 +4,7 @@
 use super::linalg::{
     SparseRows, cholesky_jitter, identity_tail_start, sandwich_gain, sandwich_walk, symmetrize,
 };
-use super::{Estimator, EstimatorError, check_commands, check_inputs};
+use super::{EstimatorError, check_commands, check_inputs};
 use crate::model::Model;
 use nalgebra::{SMatrix, SVector};
 
@@ -330,25 +330,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     }
 }
 
-impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Estimator<N, M>
-    for Ukf<Mo, N, M, S>
-{
-    fn name(&self) -> &'static str {
-        "ukf"
-    }
-    fn step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
-        self.try_step(u, y)
-    }
-    fn state(&self) -> &SVector<f64, N> {
-        &self.x
-    }
-    fn bounds(&self, i: usize) -> (f64, f64) {
-        self.three_sigma(i)
-    }
-    fn process_noise(&self) -> &SVector<f64, N> {
-        &self.process_noise
-    }
-    fn innovation(&self) -> &SVector<f64, M> {
-        &self.innovation
-    }
-}
+impl_estimator!(kalman Ukf, "ukf");

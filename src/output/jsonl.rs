@@ -172,7 +172,7 @@ pub struct Outputs {
     /// Write every k-th step's estimates (per vehicle).
     pub decimate: u64,
     steps: std::collections::BTreeMap<u8, u64>,
-    /// Print decisions to stdout and messages to stderr.
+    /// Print decisions to stdout as they are made.
     pub echo: bool,
     pub error: Option<std::io::Error>,
     /// All decisions seen (for summaries and tests).
@@ -212,10 +212,10 @@ impl Outputs {
     fn keep(&mut self, r: std::io::Result<()>) {
         let first = self.error.is_none() && r.is_err();
         keep_first(&mut self.error, r);
-        // Say it at once (a full disk should not wait for the end of a live run); the
-        // dashboard, which owns the terminal, shows it at exit.
-        if let (true, true, Some(e)) = (first, self.echo, &self.error) {
-            eprintln!(
+        // Say it at once (a full disk should not wait for the end of a live run; under the
+        // dashboard it is said once the terminal is restored).
+        if let (true, Some(e)) = (first, &self.error) {
+            tracing::error!(
                 "ahcmon: error writing JSON lines: {e}; the run goes on, the lines from now on are lost"
             );
         }
@@ -313,8 +313,14 @@ impl Sink for Outputs {
     }
 
     fn message(&mut self, sysid: u8, text: &str) {
-        if self.echo {
-            eprintln!("sysid {sysid}: {text}");
+        // A note says its severity in its first word; the level follows it, so that `-q`
+        // and RUST_LOG filter the pipeline's notes as any other diagnostics.
+        if text.starts_with("error:") {
+            tracing::error!(target: "ahcmon::pipeline", "sysid {sysid}: {text}");
+        } else if text.starts_with("warning:") {
+            tracing::warn!(target: "ahcmon::pipeline", "sysid {sysid}: {text}");
+        } else {
+            tracing::info!(target: "ahcmon::pipeline", "sysid {sysid}: {text}");
         }
     }
 

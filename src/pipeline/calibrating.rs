@@ -136,7 +136,7 @@ impl VehiclePipeline {
                 self.sysid,
                 &format!("calibration failed: {why}; trying again on the next stretch"),
             );
-            self.stage = Stage::Grounded;
+            self.set_stage(Stage::Grounded, "the calibration failed");
         }
     }
 
@@ -437,10 +437,11 @@ impl VehiclePipeline {
             );
             let mut profile = profile;
             profile.identified = false;
-            self.stage = Stage::Calibrating {
+            let stage = Stage::Calibrating {
                 profile: Box::new(profile),
                 samples: samples.to_vec(),
             };
+            self.set_stage(stage, "the identified model is for another rate");
             return;
         }
         let expected = 1.0 / profile.rate_hz;

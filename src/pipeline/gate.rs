@@ -86,7 +86,7 @@ impl VehiclePipeline {
                         s.t
                     ),
                 );
-                self.stage = Stage::Grounded;
+                self.set_stage(Stage::Grounded, "landed");
             }
             Stage::Running(r) => {
                 if let Some(since) = flew {
@@ -177,10 +177,14 @@ impl VehiclePipeline {
                         ),
                     );
                 }
-                self.stage = Stage::Calibrating {
+                let stage = Stage::Calibrating {
                     profile: Box::new(d.profile.clone()),
                     samples: Vec::with_capacity(2048),
                 };
+                self.set_stage(
+                    stage,
+                    &format!("airborne and settled; profile {}", d.source),
+                );
                 self.detection = Some(d);
             }
             Err(e) => self.fail(e.to_string(), sink),

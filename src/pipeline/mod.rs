@@ -289,8 +289,19 @@ impl VehiclePipeline {
     /// Stop this vehicle's run: said now, and kept for the summary.
     fn fail(&mut self, why: String, sink: &mut dyn Sink) {
         sink.message(self.sysid, &format!("error: {why}"));
+        self.set_stage(Stage::Failed, &why);
         self.failure = Some(why);
-        self.stage = Stage::Failed;
+    }
+
+    /// Move to another stage, said at debug level with the reason.
+    fn set_stage(&mut self, stage: Stage, why: &str) {
+        let from = self.stage_name();
+        self.stage = stage;
+        tracing::debug!(
+            "sysid {}: stage {from} -> {} ({why})",
+            self.sysid,
+            self.stage_name()
+        );
     }
 
     /// How long the stretch stored after the settle lasts (s), when not to `--calibrate-until`:
@@ -360,7 +371,10 @@ impl VehiclePipeline {
                 estimated_since: false,
             });
         }
-        self.stage = Stage::Grounded;
+        self.set_stage(
+            Stage::Grounded,
+            &format!("the vehicle rebooted at t={t:.2} s"),
+        );
         self.armed_since = None;
         self.airborne_since = None;
         self.announced_takeoff = None;

@@ -127,6 +127,11 @@ impl VehiclePipeline {
                 // across the hole as one period left its rate change to the gains).
                 let lost = ((span / r.dt).round() as usize).saturating_sub(1);
                 self.counters.coasted += lost as u64;
+                tracing::trace!(
+                    "sysid {}: {span:.3} s without a sample at t={:.2} s: {lost} periods coasted over",
+                    self.sysid,
+                    s.t
+                );
                 // An identified model's input is the last period's rate increment.
                 // The first lost period's is the last one measured; the rest, and the
                 // two periods that end at this sample and the next, are unknown: each
@@ -154,6 +159,11 @@ impl VehiclePipeline {
                 // history starts over. This sample only re-seats the filters.
                 r.core.filters.reseat(&s.rates, (span / r.dt).round());
                 self.counters.reseats += 1;
+                tracing::debug!(
+                    "sysid {}: {span:.3} s without a sample at t={:.2} s: the rates are re-measured",
+                    self.sysid,
+                    s.t
+                );
                 r.last_t = s.t;
                 r.u_pushed = 0;
                 r.rates_prev = [s.rates; 2];
@@ -233,7 +243,11 @@ impl VehiclePipeline {
         } else {
             [[0.0; 3]; 2]
         };
-        self.stage = Stage::Running(Box::new(Running {
+        let why = format!(
+            "{l} actuators, {m} measurements, a sample every {:.1} ms, command delay {delay}",
+            dt * 1e3
+        );
+        let stage = Stage::Running(Box::new(Running {
             core: Core::new(calibrated, filters, diag, self.sysid),
             dt,
             l,
@@ -247,5 +261,6 @@ impl VehiclePipeline {
             exogenous,
             last_t: last.map_or(0.0, |l| l.0),
         }));
+        self.set_stage(stage, &why);
     }
 }

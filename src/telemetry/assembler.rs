@@ -296,6 +296,10 @@ impl VehicleAssembler {
         }
         self.reboot_candidate = None;
         self.counters.reboots += 1;
+        tracing::debug!(
+            "sysid {}: rebooted (its clock went back and stayed back {REBOOT_HOLD_S} s)",
+            self.info.sysid
+        );
         // The new boot's first messages were not reordered: they confirmed it.
         let held = self
             .held_at_reboot_candidate
