@@ -238,9 +238,7 @@ impl Listener {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
-            .unwrap_or_else(|e| {
-                panic!("cannot run {}: {e}; run `bash .ci/run` once", py.display())
-            });
+            .unwrap_or_else(|e| panic!("cannot run {}: {e}", py.display()));
         let mut out = std::io::BufReader::new(child.stdout.take().unwrap());
         let mut line = String::new();
         out.read_line(&mut line).unwrap();
@@ -299,14 +297,14 @@ fn demo_alerts_reach_a_pymavlink_listener() {
     assert!(names.iter().any(|n| n == "d_tail"), "{names:?}");
 }
 
-/// MAVProxy (installed by .ci/run) listening on `masters` and sending to `out` (all on
+/// MAVProxy (tests/reference/requirements-nodeps.txt) listening on `masters` and sending to `out` (all on
 /// 127.0.0.1), its state in `dir`; returns once it has had time to start listening.
 fn mavproxy(masters: &[u16], out: u16, dir: &Path) -> std::process::Child {
     let py = common::python();
     let mavproxy = py.with_file_name("mavproxy.py");
     assert!(
         mavproxy.exists(),
-        "{} missing: `bash .ci/run` installs MAVProxy (pip --no-deps mavproxy==1.8.75 pyserial)",
+        "{} missing: it is in tests/reference/requirements-nodeps.txt (AHCMON_PYTHON names a Python without it?)",
         mavproxy.display()
     );
     let proxy = Command::new(&py)
@@ -543,7 +541,7 @@ fn serial_link_frames_and_counts_what_it_drops() {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(Stdio::piped())
         .spawn()
-        .expect("python with pymavlink (bash .ci/run creates .venv)");
+        .expect("python with pymavlink (tests/reference/requirements.txt)");
     let mut out = std::io::BufReader::new(feeder.stdout.take().unwrap());
     let mut device = String::new();
     out.read_line(&mut device).unwrap();
