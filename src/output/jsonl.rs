@@ -300,7 +300,7 @@ impl Sink for Outputs {
         }
         let k = self.steps.entry(sysid).or_insert(0);
         *k += 1;
-        if (*k - 1) % self.decimate != 0 {
+        if !(*k - 1).is_multiple_of(self.decimate) {
             return;
         }
         if let Some(w) = self.estimates.as_mut() {

@@ -214,7 +214,7 @@ impl PlotRecorder {
         let step = self.steps.entry(sysid).or_insert(0);
         let stride = self.stride.entry(sysid).or_insert(1);
         *step += 1;
-        if (*step - 1) % *stride != 0 {
+        if !(*step - 1).is_multiple_of(*stride) {
             return;
         }
         let mut full = false;

@@ -1,0 +1,92 @@
+//! The profiles' tests: built-ins load, normalisation, errors name the line.
+
+use super::*;
+
+#[test]
+fn builtin_profiles_parse() {
+    for (name, _) in BUILTIN {
+        let p = Profile::resolve(name).unwrap();
+        assert_eq!(&p.name, name);
+        let rp = p.rate_params();
+        assert_eq!(rp.actuators(), p.actuators.len());
+    }
+}
+
+#[test]
+fn quad_x_follows_ardupilot_motor_order() {
+    let p = Profile::resolve("quad-x").unwrap();
+    // Motor 1 front right CCW, 2 back left CCW, 3 front left CW, 4 back right CW.
+    let sign = |v: f64| v.signum() as i32;
+    let expect = [[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, -1]];
+    for (j, e) in expect.iter().enumerate() {
+        let (c, v) = p.column(j);
+        assert_eq!([sign(c[0]), sign(c[1]), sign(c[2])], *e, "motor {}", j + 1);
+        assert!(v < 0.0);
+        assert_eq!(p.actuators[j].channel as usize, j + 1);
+    }
+}
+
+#[test]
+fn normalisation_round_trips_and_respects_kind() {
+    let p = Profile::resolve("heli-h3-120").unwrap();
+    for j in 0..p.actuators.len() {
+        for u in [-1.0, -0.3, 0.0, 0.4, 1.0] {
+            let back = p.normalise(j, p.to_pwm(j, u));
+            assert!((back - u).abs() < 1e-12);
+        }
+    }
+    let q = Profile::resolve("quad-x").unwrap();
+    assert_eq!(q.normalise(0, 1000.0), 0.0);
+    assert_eq!(q.normalise(0, 2000.0), 1.0);
+    assert_eq!(q.normalise(0, 1500.0), 0.5);
+}
+
+#[test]
+fn unknown_key_names_file_line_and_key() {
+    let text = include_str!("../../../replay/profiles/quad-x.toml")
+        .replace("[noise]", "[noise]\nwobble = 3");
+    let e = Profile::from_toml(&text, "x.toml").unwrap_err().to_string();
+    assert!(e.starts_with("x.toml:"), "{e}");
+    assert!(e.contains("wobble"), "{e}");
+    let line: usize = e.split(':').nth(1).unwrap().parse().unwrap();
+    assert!(line > 1);
+}
+
+/// An identified ARX profile whose model was left out would run on the bare geometry as if
+/// identified (11 false decisions on the SITL heli manoeuvres log).
+#[test]
+fn an_identified_arx_profile_needs_its_model() {
+    let text = include_str!("../../../replay/profiles/heli-h3-120.toml");
+    assert!(Profile::from_toml(text, "h.toml").is_ok());
+    let identified = text.replacen("rate_hz = 50.0", "rate_hz = 50.0\nidentified = true", 1);
+    let e = Profile::from_toml(&identified, "h.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("needs its [model.arx] section"), "{e}");
+}
+
+#[test]
+fn actuator_names_are_unique_and_printable() {
+    let text = include_str!("../../../replay/profiles/quad-x.toml");
+    let twice = text.replacen("name = \"motor2\"", "name = \"motor1\"", 1);
+    let e = Profile::from_toml(&twice, "x.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`motor1` is used twice"), "{e}");
+    let empty = text.replacen("name = \"motor3\"", "name = \" \"", 1);
+    let e = Profile::from_toml(&empty, "x.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("actuator 3"), "{e}");
+    // Any printable text is fine (the planner's 10-byte names are cut on a character).
+    let umlaut = text.replacen("name = \"motor4\"", "name = \"höhe_ä\"", 1);
+    assert!(Profile::from_toml(&umlaut, "x.toml").is_ok());
+}
+
+#[test]
+fn missing_file_is_a_clear_error() {
+    let e = Profile::resolve("/no/such/profile.toml").unwrap_err();
+    assert!(e.to_string().contains("cannot read"), "{e}");
+    let e = Profile::resolve("octo-z").unwrap_err();
+    assert!(e.to_string().contains("quad-x"), "{e}");
+}
