@@ -325,16 +325,7 @@ mod tests {
         ATTITUDE_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
     };
 
-    fn frame(msg: MavMessage) -> Frame {
-        Frame {
-            version: mavlink_core::MavlinkVersion::V2,
-            sysid: 3,
-            compid: 1,
-            seq: 0,
-            msg_id: mavlink_core::Message::message_id(&msg),
-            msg,
-        }
-    }
+    use super::super::test_frame as frame;
 
     #[test]
     fn a_link_event_is_on_the_vehicles_clock_or_says_it_has_none() {

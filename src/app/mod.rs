@@ -288,3 +288,16 @@ impl Progress {
         }
     }
 }
+
+/// A frame from system 3's autopilot, for the commands' tests.
+#[cfg(test)]
+fn test_frame(msg: ahcmon::protocol::MavMessage) -> ahcmon::protocol::Frame {
+    ahcmon::protocol::Frame {
+        version: mavlink_core::MavlinkVersion::V2,
+        sysid: 3,
+        compid: 1,
+        seq: 0,
+        msg_id: mavlink_core::Message::message_id(&msg),
+        msg,
+    }
+}

@@ -264,16 +264,7 @@ mod tests {
         ATTITUDE_DATA, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavType,
     };
 
-    fn frame(msg: MavMessage) -> Frame {
-        Frame {
-            version: mavlink_core::MavlinkVersion::V2,
-            sysid: 3,
-            compid: 1,
-            seq: 0,
-            msg_id: mavlink_core::Message::message_id(&msg),
-            msg,
-        }
-    }
+    use super::super::test_frame as frame;
 
     /// The rates report after 5 s of a PX4 at 50 Hz that sends, at step k (20 ms apart),
     /// ATTITUDE, HIGHRES_IMU and what `outputs(k, ms)` gives.

@@ -617,4 +617,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> Esmf<Mo, N, M> {
     }
 }
 
-impl_estimator!(set Esmf, "esmf");
+impl_estimator!(Esmf<>, "esmf", [], projection, contradicted: []);

@@ -118,7 +118,7 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, 
     }
 }
 
-impl_estimator!(kalman KfUkf, "kf-ukf", ukf);
+impl_estimator!(KfUkf<S>, "kf-ukf", [ukf], three_sigma);
 
 impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> KfUkf<Mo, N, M, S> {
     /// One linear KF measurement update of the slave filter on q, then projection.

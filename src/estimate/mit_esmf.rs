@@ -381,4 +381,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize> MitEsmf<Mo, N, M> {
     }
 }
 
-impl_estimator!(set MitEsmf, "mit-esmf", esmf);
+impl_estimator!(MitEsmf<>, "mit-esmf", [esmf], projection, contradicted: [esmf]);

@@ -303,4 +303,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> MitUkf<Mo,
     }
 }
 
-impl_estimator!(kalman MitUkf, "mit-ukf", ukf);
+impl_estimator!(MitUkf<S>, "mit-ukf", [ukf], three_sigma);

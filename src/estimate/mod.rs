@@ -3,41 +3,16 @@
 //! fixed-size nalgebra types.
 
 /// Implements [`Estimator`] for one of the five filters from where its state lives: the
-/// filter itself, or its inner filter (`ukf` for the MIT-UKF and KF-UKF, `esmf` for the
-/// MIT-ESMF). Kalman filters bound a coordinate by ±3σ, set filters by the set's projection
-/// and say when the data contradicted the set. Every filter's own step is `try_step`.
+/// filter itself (`[]`), or its inner filter (`[ukf]` for the MIT-UKF and KF-UKF, `[esmf]`
+/// for the MIT-ESMF); then the bounding method: `three_sigma` (Kalman filters, ±3σ) or
+/// `projection` (set filters, the set's projection). Set filters also say when the data
+/// contradicted the set (`contradicted: [where the set lives]`). Every filter's own step is
+/// `try_step`.
 macro_rules! impl_estimator {
-    (kalman $ty:ident, $name:literal $(, $inner:ident)?) => {
-        impl<Mo: crate::model::Model<N, M>, const N: usize, const M: usize, const S: usize>
-            crate::estimate::Estimator<N, M> for $ty<Mo, N, M, S>
-        {
-            fn name(&self) -> &'static str {
-                $name
-            }
-            fn step(
-                &mut self,
-                u: &[f64],
-                y: &nalgebra::SVector<f64, M>,
-            ) -> Result<(), crate::estimate::EstimatorError> {
-                self.try_step(u, y)
-            }
-            fn state(&self) -> &nalgebra::SVector<f64, N> {
-                &self$(.$inner)?.x
-            }
-            fn bounds(&self, i: usize) -> (f64, f64) {
-                self$(.$inner)?.three_sigma(i)
-            }
-            fn process_noise(&self) -> &nalgebra::SVector<f64, N> {
-                &self$(.$inner)?.process_noise
-            }
-            fn innovation(&self) -> &nalgebra::SVector<f64, M> {
-                &self$(.$inner)?.innovation
-            }
-        }
-    };
-    (set $ty:ident, $name:literal $(, $inner:ident)?) => {
-        impl<Mo: crate::model::Model<N, M>, const N: usize, const M: usize>
-            crate::estimate::Estimator<N, M> for $ty<Mo, N, M>
+    ($ty:ident<$($param:ident),*>, $name:literal, [$($inner:ident)?], $bounds:ident
+        $(, contradicted: [$($set:ident)?])?) => {
+        impl<Mo: crate::model::Model<N, M>, const N: usize, const M: usize $(, const $param: usize)*>
+            crate::estimate::Estimator<N, M> for $ty<Mo, N, M $(, $param)*>
         {
             fn name(&self) -> &'static str {
                 $name
@@ -53,7 +28,7 @@ macro_rules! impl_estimator {
                 &self$(.$inner)?.x
             }
             fn bounds(&self, i: usize) -> (f64, f64) {
-                self$(.$inner)?.projection(i)
+                self$(.$inner)?.$bounds(i)
             }
             fn process_noise(&self) -> &nalgebra::SVector<f64, N> {
                 &self$(.$inner)?.process_noise
@@ -61,9 +36,11 @@ macro_rules! impl_estimator {
             fn innovation(&self) -> &nalgebra::SVector<f64, M> {
                 &self$(.$inner)?.innovation
             }
-            fn contradicted(&self) -> bool {
-                self$(.$inner)?.outcome.contradicted()
-            }
+            $(
+                fn contradicted(&self) -> bool {
+                    self$(.$set)?.outcome.contradicted()
+                }
+            )?
         }
     };
 }

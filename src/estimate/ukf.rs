@@ -330,4 +330,4 @@ impl<Mo: Model<N, M>, const N: usize, const M: usize, const S: usize> Ukf<Mo, N,
     }
 }
 
-impl_estimator!(kalman Ukf, "ukf");
+impl_estimator!(Ukf<S>, "ukf", [], three_sigma);

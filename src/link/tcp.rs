@@ -49,12 +49,19 @@ async fn write_or_drop(stream: &mut Option<TcpStream>, frame: &[u8]) -> bool {
     }
 }
 
-/// One read of a connected stream; a closed or failed one is dropped (`Read::Lost`).
-async fn read_stream(stream: &mut Option<TcpStream>, buf: &mut [u8]) -> Option<Read> {
+/// One read of a connected stream: `None` when there is none. A closed or failed one is
+/// dropped, with `lost` as the note (`Read::Lost`).
+async fn read_stream(
+    stream: &mut Option<TcpStream>,
+    buf: &mut [u8],
+    notes: &mut VecDeque<String>,
+    lost: impl FnOnce() -> String,
+) -> Option<Read> {
     let s = stream.as_mut()?;
     Some(match s.read(buf).await {
         Ok(0) | Err(_) => {
             *stream = None;
+            notes.push_back(lost());
             Read::Lost
         }
         Ok(n) => Read::Bytes(n),
@@ -78,19 +85,14 @@ impl TcpIn {
         buf: &mut [u8],
         notes: &mut VecDeque<String>,
     ) -> std::io::Result<Read> {
-        match read_stream(&mut self.stream, buf).await {
-            Some(Read::Lost) => {
-                notes.push_back("the client disconnected; waiting for another".into());
-                Ok(Read::Lost)
-            }
-            Some(read) => Ok(read),
-            None => {
-                let (s, from) = self.listener.accept().await?;
-                self.stream = Some(s);
-                notes.push_back(format!("a client connected from {from}"));
-                Ok(Read::Nothing)
-            }
+        let lost = || "the client disconnected; waiting for another".to_string();
+        if let Some(read) = read_stream(&mut self.stream, buf, notes, lost).await {
+            return Ok(read);
         }
+        let (s, from) = self.listener.accept().await?;
+        self.stream = Some(s);
+        notes.push_back(format!("a client connected from {from}"));
+        Ok(Read::Nothing)
     }
 
     pub(super) async fn send(
@@ -146,24 +148,17 @@ impl TcpOut {
         notes: &mut VecDeque<String>,
     ) -> std::io::Result<Read> {
         let addr = self.addr;
-        match read_stream(&mut self.stream, buf).await {
-            Some(Read::Lost) => {
-                notes.push_back(format!(
-                    "connection to {addr} lost; reconnecting every second"
-                ));
-                Ok(Read::Lost)
-            }
-            Some(read) => Ok(read),
-            None => {
-                tokio::time::sleep(Duration::from_secs(1)).await;
-                if let Ok(s) = TcpStream::connect(addr).await {
-                    self.stream = Some(s);
-                    self.reconnects += 1;
-                    notes.push_back(format!("connected to {addr}"));
-                }
-                Ok(Read::Nothing)
-            }
+        let lost = || format!("connection to {addr} lost; reconnecting every second");
+        if let Some(read) = read_stream(&mut self.stream, buf, notes, lost).await {
+            return Ok(read);
         }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        if let Ok(s) = TcpStream::connect(addr).await {
+            self.stream = Some(s);
+            self.reconnects += 1;
+            notes.push_back(format!("connected to {addr}"));
+        }
+        Ok(Read::Nothing)
     }
 
     pub(super) async fn send(
