@@ -118,7 +118,7 @@ fn paper_run(c: &mut Criterion) {
     g.finish();
 }
 
-/// Quad X with a_z: n = 11, m = 4 (DESIGN.md target: ≤ 10 µs per step per filter).
+/// Quad X with a_z: n = 11, m = 4 (target: ≤ 10 µs per step per filter).
 fn vehicle_steps(c: &mut Criterion) {
     use ahcmon::estimate::vehicle::{FilterPair, FilterSetup};
     use ahcmon::sim::vehicle::{VehicleSim, VehicleSimConfig};

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Copy a .tlog without the given MAVLink message ids (standard library only).
 
-benches/replay.sh uses it to make the DESIGN.md replay log (ATTITUDE and SERVO_OUTPUT_RAW,
+benches/replay.sh uses it to make the target replay log (ATTITUDE and SERVO_OUTPUT_RAW,
 no IMU) from the simulator's, which also streams RAW_IMU (id 27).
 Usage: strip_tlog.py IN OUT ID[,ID...]
 """

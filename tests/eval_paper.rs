@@ -91,7 +91,7 @@ fn healthy_ten_minutes_ten_seeds_no_fault_decision() {
 
 #[test]
 fn mit_ukf_tracks_gamma_after_the_fault() {
-    // DESIGN target: after 3 s the MIT-UKF's gamma within 0.05 of the truth (Gaussian case).
+    // The target: after 3 s the MIT-UKF's gamma within 0.05 of the truth (Gaussian case).
     let r = rows("paper-fig8-noise-step", 3);
     let mit = row(&r, "mit-ukf");
     assert!(

@@ -96,7 +96,7 @@ fn mit_ukf_one_step_gradient_matches_finite_differences() {
         );
         assert!(err <= 1e-5, "q{i}: analytic {} vs fd {fd}", g[i]);
     }
-    // The trap of estimators.md §0.4: the one-step gradient of every AHC entry is zero.
+    // The trap (docs/estimators.md): the one-step gradient of every AHC entry is zero.
     assert!(g[3].abs() < 1e-12 * scale && g[4].abs() < 1e-12 * scale);
 }
 

@@ -1,4 +1,4 @@
-//! Per-vehicle, per-actuator decisions from the two monitoring filters (estimators.md §4).
+//! Per-vehicle, per-actuator decisions from the two monitoring filters (`docs/diagnosis.md`).
 //!
 //! The statistics are deviations of an actuator's *effective output* over a short window: at
 //! its operating point, `(gamma_j - 1) ū_j + delta_j` (ū_j the windowed mean command), and in the
@@ -171,7 +171,7 @@ impl Event {
     }
 }
 
-/// One decision, as written to the decisions JSONL (DESIGN.md "Files").
+/// One decision, as written to the decisions JSONL (`replay/schemas/decisions.schema.json`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Decision {
     #[serde(serialize_with = "super::serialize_time")]

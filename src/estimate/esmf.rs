@@ -5,7 +5,7 @@
 //! linearised set, the process-noise set and the linearisation-error set; the update intersects
 //! with the measurement set (paper's `rho`) and rescales by the consistency `δ_k`.
 //! `δ_k ≤ 0` means the data contradict the sets: that is fault evidence, handled by the policy
-//! of estimators.md §3.5 (see [`EsmfParams`]).
+//! in [`EsmfParams`] (`docs/estimators.md`).
 
 use super::linalg::{
     SparseRows, cholesky_jitter, identity_tail_start, mirror_upper, sandwich_walk_in_place,
@@ -106,7 +106,7 @@ impl<const N: usize, const M: usize> ShapeStep<N, M> {
 
 /// Range of the bilinear remainder `Σ c z_j z_k` over `dz ∈ E(0, P)`: for one term,
 /// `dz_j dz_k ∈ [(P_jk - √(P_jj P_kk))/2, (P_jk + √(P_jj P_kk))/2]` (exact support; note the ½,
-/// which estimators.md §3.2 drops). Returns the box centre (a shift of the predicted centre)
+/// which a plain product bound drops). Returns the box centre (a shift of the predicted centre)
 /// and half-widths per state row.
 pub fn remainder_box<const N: usize>(
     terms: &[BilinearTerm],

@@ -4,7 +4,7 @@
 //! The reader streams (memory stays flat in the file's length), never panics on bad bytes,
 //! and counts everything it drops: on a bad magic or CRC it slides byte by byte (`resync`,
 //! `bad_crc`); a well-formed frame with an id our dialect does not know is skipped whole
-//! (`unknown_id`) — sliding into it would lose the frames after it (shared/mavlink.md §1.3);
+//! (`unknown_id`) — sliding into it would lose the frames after it (its length is known);
 //! a record cut off by the end of the file is `truncated`.
 
 use crate::protocol::MavMessage;

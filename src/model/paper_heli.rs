@@ -2,7 +2,7 @@
 //! `u = [theta_M, theta_lat, theta_lon, theta_T]` (rad of blade / swash angle about neutral).
 //!
 //! Continuous rotational dynamics with quasi-steady flapping (paper eq. 9, 11, 12 structure;
-//! coefficients from the X-Cell 60 geometry, `shared/estimators.md` §5.2 — physically
+//! coefficients from the X-Cell 60 geometry, see `docs/estimators.md` — physically
 //! reasonable, *not* identified from a real vehicle):
 //!
 //! ```text
@@ -45,7 +45,7 @@ pub struct PaperHeliParams {
 }
 
 impl PaperHeliParams {
-    /// X-Cell 60 based values of estimators.md §5.2 with zero trim moment.
+    /// The X-Cell 60 based values (`docs/estimators.md`) with zero trim moment.
     pub fn xcell60() -> Self {
         let (ixx, iyy, izz) = (0.18, 0.34, 0.28);
         // Rotor moment stiffness K_beta + T_mr h_mr, flapping time constant and gains.

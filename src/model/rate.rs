@@ -1,4 +1,4 @@
-//! The rate-effectiveness model for any vehicle (DESIGN.md "The models", item 2):
+//! The rate-effectiveness model for any vehicle (`docs/estimators.md`, the models):
 //!
 //! ```text
 //! omega_dot = -D omega + G (Gamma u + Delta) + c          (3 rate rows)

@@ -1,4 +1,4 @@
-//! JSON-lines files (DESIGN.md "Files"): decisions, estimates and the simulator's truth. One
+//! JSON-lines files: decisions, estimates and the simulator's truth. One
 //! object per line, flushed per line so a reader (or a crash) never sees half a record.
 
 use crate::diagnose::vehicle::Decision;

@@ -1,6 +1,6 @@
 //! MAVLink v1/v2 framing with our own drop counters.
 //!
-//! The `mavlink` crate's readers skip bad candidates silently (shared/mavlink.md §1.2), so we
+//! The `mavlink` crate's readers skip bad candidates silently (`mavlink-core` 0.21), so we
 //! frame ourselves: check the magic, the length, the CRC with the dialect's CRC_EXTRA, and
 //! decode the payload with the generated dialect. Every byte or frame we drop is counted.
 

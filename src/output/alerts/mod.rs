@@ -1,5 +1,4 @@
-//! Alerts into a mission planner (DESIGN.md "Alerts to a mission planner", shared/mavlink.md
-//! §3): the monitor as a MAVLink component of its own — HEARTBEAT at 1 Hz
+//! Alerts into a mission planner: the monitor as a MAVLink component of its own — HEARTBEAT at 1 Hz
 //! (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) sent as the vehicle's system id with
 //! component id 191, a STATUSTEXT per decision (severity by class, at most 50 characters,
 //! rate-limited), NAMED_VALUE_FLOAT `g_<name>` / `d_<name>` per actuator at 2 Hz, and our
