@@ -33,6 +33,13 @@ impl Monitor {
         self.run(frame.sysid, sink);
     }
 
+    /// One record of a vehicle's own log (DataFlash, ULog), as vehicle `sysid`.
+    pub fn on_record(&mut self, sysid: u8, record: &crate::telemetry::Record, sink: &mut dyn Sink) {
+        self.samples.clear();
+        self.assembler.on_record(sysid, record, &mut self.samples);
+        self.run(sysid, sink);
+    }
+
     /// End of input: samples still waiting for their a_z are processed without it, and a
     /// reboot the new boot gave no sample after is still told (its warning, the summary's
     /// marks).

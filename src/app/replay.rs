@@ -3,7 +3,7 @@
 
 use super::{InputFileError, Progress, SPEED_RANGE, UsageError, in_range};
 use crate::cli::{ReplayArgs, RunArgs};
-use ahcmon::link::TlogReader;
+use ahcmon::link::{LogError, LogFormat, TlogReader};
 use ahcmon::monitor::Monitor;
 use ahcmon::output::summary;
 use anyhow::Context;
@@ -41,6 +41,12 @@ fn replay(
         source,
     };
     let size = std::fs::metadata(file).map_err(input_error)?.len();
+    let format = std::fs::File::open(file)
+        .and_then(ahcmon::link::sniff)
+        .map_err(input_error)?;
+    if format != LogFormat::Tlog {
+        return replay_own_log(file, format, size, args, plot);
+    }
     let mut reader = TlogReader::open(file).map_err(input_error)?;
     let mut monitor = Monitor::new(args.pipeline_config()?);
     let mut files = args.files(&[file], &[("--plot", plot)])?;
@@ -180,6 +186,105 @@ fn replay(
     // An estimation that failed (said when it happened and in the summary) is no success: a
     // script must not take the log as checked. (A log with no flight in it is: the summary
     // says why nothing was estimated.)
+    let failed: Vec<String> = monitor
+        .pipelines
+        .iter()
+        .filter_map(|(sysid, p)| p.failed().map(|why| format!("sysid {sysid}: {why}")))
+        .collect();
+    if !failed.is_empty() {
+        anyhow::bail!("the estimation failed ({})", failed.join("; "));
+    }
+    Ok(())
+}
+
+/// A vehicle's own log (DataFlash, ULog), headless: one vehicle, its records on its own
+/// clock through the same monitor.
+fn replay_own_log(
+    file: &std::path::Path,
+    format: LogFormat,
+    size: u64,
+    args: &RunArgs,
+    plot: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    let mut monitor = Monitor::new(args.pipeline_config()?);
+    let mut files = args.files(&[file], &[("--plot", plot)])?;
+    if let Some(p) = plot {
+        std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
+        files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
+    }
+    tracing::info!("{}: {}", file.display(), format.name());
+    let mut progress = Progress::new(true);
+    let started = std::time::Instant::now();
+    let mut shown = 0;
+    let mut emit = |r: &ahcmon::telemetry::Record| monitor.on_record(1, r, &mut files);
+    let read = match format {
+        LogFormat::DataFlash => {
+            let input = std::fs::File::open(file).map_err(|source| InputFileError {
+                path: file.display().to_string(),
+                source,
+            })?;
+            ahcmon::link::dataflash::read(std::io::BufReader::new(input), &mut emit, &mut |at| {
+                if let Some(pct) = (at * 100).checked_div(size)
+                    && pct as usize != shown
+                {
+                    shown = pct as usize;
+                    progress.show(&format!(
+                        "replay: {pct:3}% [{:<40}]",
+                        "#".repeat(shown * 40 / 100)
+                    ));
+                }
+            })
+        }
+        _ => ahcmon::link::ulog::read(file, &mut emit),
+    };
+    progress.clear();
+    let report = match read {
+        Ok(r) => r,
+        Err(LogError::Io(source)) => {
+            return Err(InputFileError {
+                path: file.display().to_string(),
+                source,
+            }
+            .into());
+        }
+        Err(e) => {
+            return Err(UsageError(format!("{}: {} ({e})", file.display(), format.name())).into());
+        }
+    };
+    monitor.finish(&mut files);
+    let replay_time = started.elapsed();
+    let write_error = files
+        .error
+        .take()
+        .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
+    if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
+        let title = format!("ahcmon replay {}", file.display());
+        std::fs::write(p, rec.render(&title))
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        tracing::info!("plot written to {}", p.display());
+    }
+    out!(
+        "{}",
+        summary::render(&monitor, &report.counters, &files.seen)
+    );
+    for note in &report.notes {
+        outln!("log: {note}");
+    }
+    if report.dropouts > 0 {
+        outln!(
+            "log: the on-board logger dropped data {} times ({} ms in all)",
+            report.dropouts,
+            report.dropout_ms
+        );
+    }
+    outln!(
+        "replayed {} ({}, {:.1} MB) in {:.2} s",
+        file.display(),
+        format.name(),
+        report.bytes as f64 / 1e6,
+        replay_time.as_secs_f64()
+    );
+    write_error.map_or(Ok(()), Err)?;
     let failed: Vec<String> = monitor
         .pipelines
         .iter()

@@ -61,6 +61,13 @@ pub fn render(
             c.non_finite,
             c.lost_frames
         );
+        if c.interpolated + c.unpaired_outputs > 0 {
+            let _ = writeln!(
+                s,
+                "  pairing: {} of the samples at their outputs' instant with the rates interpolated between the two around it (rates and outputs not co-timed: {} rate, {} output messages); {} output messages without two consecutive rate instants around them",
+                c.interpolated, c.rate_messages, c.output_messages, c.unpaired_outputs
+            );
+        }
         let Some(p) = monitor.pipelines.get(sysid) else {
             // Say which half never came.
             let missing = match (c.rate_messages, c.output_messages) {

@@ -4,8 +4,10 @@ pub mod assembler;
 pub mod detect;
 pub mod encode;
 pub mod profile;
+pub mod record;
 
 pub use assembler::{
     Assembler, AssemblerConfig, TelemetryCounters, TelemetrySample, VehicleAssembler, VehicleInfo,
 };
 pub use profile::{Profile, ProfileError, Role, VehicleKind};
+pub use record::Record;

@@ -12,6 +12,8 @@ use std::collections::BTreeMap;
 
 /// Standard gravity (ArduPilot's GRAVITY_MSS): RAW_IMU / SCALED_IMU accelerations are in mG.
 mod clock;
+mod pairing;
+mod record;
 
 const G0: f64 = 9.80665;
 /// Largest backwards step of the vehicle clock treated as reordering; more is a reboot once
@@ -73,6 +75,13 @@ pub struct TelemetryCounters {
     /// received: far fewer outputs than rates leave most rate instants unmatched.
     pub rate_messages: u64,
     pub output_messages: u64,
+    /// Samples whose rates were interpolated between the two rate instants around their
+    /// outputs' instant (streams not co-timed: slower outputs, or another clock).
+    pub interpolated: u64,
+    /// Output messages no sample was made of: no rates within the skew tolerance, and no
+    /// two consecutive rate instants around them (counted when the rates come at least as
+    /// often as the outputs; otherwise the rate instants are `unmatched`).
+    pub unpaired_outputs: u64,
 }
 
 /// What the vehicle said about itself: heartbeat and parameters.
@@ -123,7 +132,15 @@ pub struct VehicleAssembler {
     pub counters: TelemetryCounters,
     rates: Option<Stamped<([f64; 3], [f64; 3])>>,
     rates_used: bool,
+    /// The rate instant before `rates`: with it, outputs stamped between two rate instants
+    /// get rates interpolated to their own instant (`pairing.rs`).
+    rates_prev: Option<Stamped<([f64; 3], [f64; 3])>>,
     outputs: Option<Stamped<[u16; 16]>>,
+    outputs_used: bool,
+    /// Smoothed interval between output messages (s), once seen.
+    output_period: Option<f64>,
+    /// The latest attitude of a log that records it apart from the rates.
+    attitude: [f64; 3],
     az: Option<Stamped<f64>>,
     /// The message a_z is taken from (see `on_az`), its last interval (s), and the last stamp
     /// of each source.
@@ -194,7 +211,11 @@ impl VehicleAssembler {
             counters: TelemetryCounters::default(),
             rates: None,
             rates_used: false,
+            rates_prev: None,
             outputs: None,
+            outputs_used: false,
+            output_period: None,
+            attitude: [0.0; 3],
             az: None,
             az_source: None,
             az_interval: None,
@@ -225,15 +246,28 @@ impl VehicleAssembler {
     }
 
     fn use_message(&mut self, compid: u8, msg: &MavMessage, out: &mut Vec<TelemetrySample>) {
-        // A new rate instant releases a sample still waiting for its a_z, without it; one from
-        // a clock far behind (stale, or a reboot) does not.
-        if let MavMessage::ATTITUDE(a) = msg
-            && self.is_autopilot_component(compid)
-            && !self.behind(f64::from(a.time_boot_ms) * 1e-3)
-        {
+        let rate_instant = match msg {
+            MavMessage::ATTITUDE(a) if self.is_autopilot_component(compid) => {
+                Some(f64::from(a.time_boot_ms) * 1e-3)
+            }
+            _ => None,
+        };
+        self.release_pending(rate_instant, out);
+        let emitted = self.message(compid, msg);
+        self.deliver(emitted, out);
+    }
+
+    /// A new rate instant releases a sample still waiting for its a_z, without it; one from
+    /// a clock far behind (stale, or a reboot) does not.
+    fn release_pending(&mut self, rate_instant: Option<f64>, out: &mut Vec<TelemetrySample>) {
+        if rate_instant.is_some_and(|t| !self.behind(t)) {
             out.extend(self.pending.take());
         }
-        let emitted = self.message(compid, msg);
+    }
+
+    /// A sample just made goes out, or waits for its instant's a_z when the vehicle sends one;
+    /// a waiting sample takes an a_z that has come.
+    fn deliver(&mut self, emitted: Option<TelemetrySample>, out: &mut Vec<TelemetrySample>) {
         let max_skew = self.max_skew();
         if let (Some(p), Some(a)) = (self.pending.as_mut(), self.az)
             && (a.t - p.t).abs() <= max_skew
@@ -312,42 +346,9 @@ impl VehicleAssembler {
                     return None;
                 }
                 let t = f64::from(a.time_boot_ms) * 1e-3;
-                if !self.tick(t) {
-                    return None;
-                }
-                self.counters.rate_messages += 1;
-                if let Some(last) = self.last_sample_t {
-                    if t < last {
-                        self.counters.out_of_order += 1;
-                        return None;
-                    }
-                    if t == last {
-                        self.counters.duplicates += 1;
-                        return None;
-                    }
-                }
-                if let Some(prev) = self.rates
-                    && !self.rates_used
-                {
-                    // Rates still waiting for their outputs are newer, or the same instant.
-                    if t < prev.t {
-                        self.counters.out_of_order += 1;
-                        return None;
-                    }
-                    if t == prev.t {
-                        self.counters.duplicates += 1;
-                        return None;
-                    }
-                    self.counters.unmatched += 1;
-                }
-                if let Some(prev) = self.rates {
-                    self.learn_rate_period(t - prev.t);
-                }
                 let rates = [v[0], v[1], v[2]].map(f64::from);
                 let att = [v[3], v[4], v[5]].map(f64::from);
-                self.rates = Some(Stamped { t, v: (rates, att) });
-                self.rates_used = false;
-                self.try_emit()
+                self.on_rates(t, rates, att)
             }
             MavMessage::SERVO_OUTPUT_RAW(s) => {
                 // port 0 carries outputs 1..16; other ports are further banks we do not map.
@@ -425,37 +426,6 @@ impl VehicleAssembler {
         }
     }
 
-    /// The pairing tolerance (s): the configured one, or under half the rate period if shorter.
-    pub fn max_skew(&self) -> f64 {
-        self.rate_period
-            .map_or(self.cfg.max_skew_s, |p| self.cfg.max_skew_s.min(0.45 * p))
-    }
-
-    /// Smooth the interval between rate instants; a lost instant (a longer interval) does not
-    /// stretch it.
-    fn learn_rate_period(&mut self, dt: f64) {
-        if !(dt > 0.0 && dt < 1.0) {
-            return;
-        }
-        self.rate_period = Some(match self.rate_period {
-            None => dt,
-            Some(p) if dt < 1.5 * p => 0.9 * p + 0.1 * dt,
-            // Longer: a hole, or the stream slowed down; adapt slowly from below.
-            Some(p) => p * 1.02,
-        });
-    }
-
-    /// New outputs, unless older than those held (a reordered message: counted, dropped).
-    fn set_outputs(&mut self, t: f64, pwm: [u16; 16]) -> Option<TelemetrySample> {
-        self.counters.output_messages += 1;
-        if self.outputs.is_some_and(|o| t < o.t) {
-            self.counters.out_of_order += 1;
-            return None;
-        }
-        self.outputs = Some(Stamped { t, v: pwm });
-        self.try_emit()
-    }
-
     fn on_az(&mut self, source: AzSource, t: f64, az: f64) -> Option<TelemetrySample> {
         if !az.is_finite() {
             self.counters.non_finite += 1;
@@ -489,31 +459,6 @@ impl VehicleAssembler {
         self.az = Some(Stamped { t, v: az });
         self.has_imu = true;
         None
-    }
-
-    fn try_emit(&mut self) -> Option<TelemetrySample> {
-        let rates = self.rates?;
-        let outputs = self.outputs?;
-        let max_skew = self.max_skew();
-        if self.rates_used || (rates.t - outputs.t).abs() > max_skew {
-            return None;
-        }
-        self.rates_used = true;
-        self.last_sample_t = Some(rates.t);
-        self.counters.samples += 1;
-        let az = self
-            .az
-            .filter(|a| (a.t - rates.t).abs() <= max_skew)
-            .map(|a| a.v);
-        Some(TelemetrySample {
-            t: rates.t,
-            rates: rates.v.0,
-            attitude: rates.v.1,
-            az,
-            pwm: outputs.v,
-            armed: self.info.armed,
-            rel_alt: self.rel_alt,
-        })
     }
 }
 
@@ -563,6 +508,19 @@ impl Assembler {
         if let Some(v) = self.vehicles.get_mut(&sysid) {
             v.on_message(compid, msg, out);
         }
+    }
+
+    /// One record of a vehicle's own log (DataFlash, ULog: one vehicle per file).
+    pub fn on_record(
+        &mut self,
+        sysid: u8,
+        record: &crate::telemetry::Record,
+        out: &mut Vec<TelemetrySample>,
+    ) {
+        self.vehicles
+            .entry(sysid)
+            .or_insert_with(|| VehicleAssembler::new(sysid, self.cfg))
+            .on_record(record, out);
     }
 
     /// A frame's sequence number, for a vehicle already seen (see
