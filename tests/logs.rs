@@ -1,6 +1,7 @@
 //! Vehicles' own logs (ArduPilot DataFlash, PX4 ULog) against the reference readers
 //! (pymavlink's DFReader, pyulog) on every such file of the external data, and `replay` on
-//! each, whole and damaged.
+//! each, whole and damaged. The logs are not in the repository (several have no licence), so
+//! these run on request, where the logs are: `cargo test --release --test logs -- --ignored`.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
@@ -83,6 +84,7 @@ fn num(v: &serde_json::Value) -> f64 {
 }
 
 #[test]
+#[ignore = "needs the external logs (../shared/data or AHCMON_SHARED_DATA): cargo test --release --test logs -- --ignored"]
 fn the_readers_see_what_pymavlink_and_pyulog_see() {
     let logs = own_logs();
     for path in &logs {
@@ -179,6 +181,7 @@ fn ahcmon() -> Command {
 }
 
 #[test]
+#[ignore = "needs the external logs (../shared/data or AHCMON_SHARED_DATA): cargo test --release --test logs -- --ignored"]
 fn replay_reads_every_own_log_without_a_converter() {
     for path in own_logs() {
         let out = ahcmon().arg("replay").arg(&path).output().unwrap();
@@ -199,6 +202,7 @@ fn replay_reads_every_own_log_without_a_converter() {
 }
 
 #[test]
+#[ignore = "needs the external logs (../shared/data or AHCMON_SHARED_DATA): cargo test --release --test logs -- --ignored"]
 fn damaged_own_logs_are_read_up_to_the_damage_and_say_so() {
     let dir = common::temp_dir("damaged-own-logs");
     let logs = own_logs();
