@@ -158,12 +158,7 @@ fn replay(
         .error
         .take()
         .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
-    if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
-        let title = format!("ahcmon replay {}", file.display());
-        std::fs::write(p, rec.render(&title))
-            .with_context(|| format!("cannot write {}", p.display()))?;
-        tracing::info!("plot written to {}", p.display());
-    }
+    write_plot(plot, &files, file)?;
     out!(
         "{}",
         summary::render(&monitor, &reader.counters, &files.seen)
@@ -183,18 +178,7 @@ fn replay(
         ))
         .into());
     }
-    // An estimation that failed (said when it happened and in the summary) is no success: a
-    // script must not take the log as checked. (A log with no flight in it is: the summary
-    // says why nothing was estimated.)
-    let failed: Vec<String> = monitor
-        .pipelines
-        .iter()
-        .filter_map(|(sysid, p)| p.failed().map(|why| format!("sysid {sysid}: {why}")))
-        .collect();
-    if !failed.is_empty() {
-        anyhow::bail!("the estimation failed ({})", failed.join("; "));
-    }
-    Ok(())
+    estimation_failed(&monitor)
 }
 
 /// A vehicle's own log (DataFlash, ULog), headless: one vehicle, its records on its own
@@ -257,12 +241,7 @@ fn replay_own_log(
         .error
         .take()
         .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
-    if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
-        let title = format!("ahcmon replay {}", file.display());
-        std::fs::write(p, rec.render(&title))
-            .with_context(|| format!("cannot write {}", p.display()))?;
-        tracing::info!("plot written to {}", p.display());
-    }
+    write_plot(plot, &files, file)?;
     out!(
         "{}",
         summary::render(&monitor, &report.counters, &files.seen)
@@ -285,6 +264,28 @@ fn replay_own_log(
         replay_time.as_secs_f64()
     );
     write_error.map_or(Ok(()), Err)?;
+    estimation_failed(&monitor)
+}
+
+/// The plot of a replay, once its log is through.
+fn write_plot(
+    plot: Option<&std::path::Path>,
+    files: &ahcmon::output::jsonl::Outputs,
+    file: &std::path::Path,
+) -> anyhow::Result<()> {
+    if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
+        let title = format!("ahcmon replay {}", file.display());
+        std::fs::write(p, rec.render(&title))
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        tracing::info!("plot written to {}", p.display());
+    }
+    Ok(())
+}
+
+/// An estimation that failed (said when it happened and in the summary) is no success: a
+/// script must not take the log as checked. (A log with no flight in it is: the summary says
+/// why nothing was estimated.)
+fn estimation_failed(monitor: &Monitor) -> anyhow::Result<()> {
     let failed: Vec<String> = monitor
         .pipelines
         .iter()

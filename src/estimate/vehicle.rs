@@ -417,9 +417,9 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
     /// MIT-UKF's updates leave it there (a consider state, as while the fit is followed): the
     /// class says where it is, and the release only says that the innovations moved (the
     /// fault's changed coefficient grew or went back, or a strong gust). Left to the updates,
-    /// which take the gusts for white noise, a gust's release moved the plane's aileron
-    /// offset's gain from 1 to 0.85 in one step and to 0.77 within a second, its bounds
-    /// excluding 1, while the class said bias (seed 5). Reseated on every step, not only
+    /// which take the gusts for white noise, a gust's release can move an offset's unchanged
+    /// gain far from 1 within a second, its bounds excluding 1, while the class says bias
+    /// (measured on the plane's aileron offset). Reseated on every step, not only
     /// held: a class that changes and comes back finds it at the fit, not where the updates
     /// had taken it meanwhile, and a consider state's variance, which no update reduces,
     /// does not grow with the process noise.
@@ -458,11 +458,9 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             after_steps: (IDENTIFY_AFTER_S / Model::dt(&s.model)).round() as u64,
             // The chi-square 99.99 % quantile: held at the fit (`hold_class`), the filter no
             // longer takes the gusts into the held gain and bias, so their colour reaches the
-            // window's mean, and at 99.9 % a gust released the plane's aileron offset (seed 38:
-            // 16.4 against 16.27) for its last 20 s, 96 % of its steps then off by more than
-            // 0.05; at 99.99 % (seeds 1-10, 11-40: aileron 3.7 -> 0.0, 28.6 -> 19.6 %, hexa
-            // motor 5 8.4 -> 3.1, 5.5 -> 4.1 %, elevator 11.7 -> 8.8, 3.8 -> 3.4 %; decisions
-            // the same). A fault's end still releases on the SITL logs (29.7, 72.7, 164.3).
+            // window's mean; at 99.99 % coloured noise releases the hold on at most 0.01 % of
+            // windows (see `IdentifyParams`), while a fault's end still releases it. The
+            // measurements behind the choice are in docs/tuning-log.md.
             release_chi2: if M == 4 { 23.51 } else { 21.11 },
         });
         f
@@ -658,9 +656,9 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // A release (a further change, the fault gone, or a gust) ends the following until the
         // data's fit agrees with the last one again (`hold_class`): the fit then spans the
         // change too, and followed regardless, a reseat 3 s after the fault went away held the
-        // loss's gain for 13 s more on the SITL helicopter's hover log. A gust's release, not
-        // resumed, had left the plane's aileron offset (seed 38) off by more than 0.05 on 96 %
-        // of its last 20 s (resumed, 15 %; seeds 11-40, mean 19.6 -> 8.7 %).
+        // loss's gain for 13 s more on the SITL helicopter's hover log. Resumed once the fit
+        // agrees again, a gust's release does not leave the estimate off for the rest of the
+        // fault.
         let now = self.ukf.identifying();
         if in_force {
             self.steps += 1;
@@ -683,9 +681,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // While followed, the updates leave a decided actuator's gain and bias at the last
         // clear fit too (`hold_class`): on a hovering motor the data tell a gain from an offset
         // only now and then, and between those fits the filter's updates moved the gain of
-        // the quad's motor 4 offset to 1.056, its bounds excluding 1 (seeds 11-40, steps off:
-        // motor 4 3.8 -> 3.4 %, hexa motor 5 3.2 -> 2.4 %, swash 2 1.1 -> 0.0 %, aileron 8.7 ->
-        // 7.7 %; decisions the same; the SITL quad hover log clears 0.4 s earlier).
+        // a motor's offset away from 1, its bounds excluding 1.
         let l = (N - 3) / 2;
         for k in 0..l {
             match self.following[k] {
@@ -732,8 +728,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // followed: `set_fault_in_force`): the filter, taking the gusts for white noise, weighs
         // each sample as if it were independent of those the fit has already weighed with
         // their colour, and moved the aileron's gain, reseated at 1, by up to 0.15 in the one
-        // step after a reseat (off by more than 0.05 after onset + 5 s on 33.3 % of the steps,
-        // seeds 1-10; so left, 3.7 %). With no gusts, 0 %.
+        // step after a reseat (the figures are in docs/tuning-log.md).
         self.ukf.reseat_entries(&fit_entries(j, l, &c));
     }
     fn recovered(&mut self, j: usize) {
