@@ -339,12 +339,18 @@ fn heli_maneuvers_servo3_gain_fault() {
 #[test]
 fn a_profile_for_another_vehicle_is_warned_about_twice() {
     let rel = "sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog";
-    let warned = |run: &Collect, what: &str| run.messages.iter().any(|m| m.contains(what));
+    let warned = |run: &Collect, what: &str| {
+        run.messages.iter().any(|m| m.contains(what))
+            || run.decisions.iter().any(|d| {
+                d.event == Event::CannotEstimate
+                    && d.detail.as_deref().is_some_and(|t| t.contains(what))
+            })
+    };
     // Chosen from the HEARTBEAT: neither warning.
     let run = replay(rel, None);
     assert!(!warned(&run, "mean nothing") && !warned(&run, "worse than a constant"));
     // A plane's profile on the quadrotor: the HEARTBEAT says so before the flight, and the
-    // calibration's fit after 20 s (roll R² = -46).
+    // calibration's fit after 20 s (roll R² = -46) as a cannot_estimate decision.
     let run = replay(rel, Some("plane"));
     assert!(warned(&run, "mean nothing"), "{:?}", run.messages);
     assert!(warned(&run, "worse than a constant"), "{:?}", run.messages);

@@ -155,6 +155,9 @@ pub enum Event {
     LinkRestored,
     ExcitationLow,
     FilterReset,
+    /// The data cannot support an estimate (too slow a stream, a model that does not fit):
+    /// said once, and no fault is decided for the vehicle.
+    CannotEstimate,
 }
 
 impl Event {
@@ -167,6 +170,7 @@ impl Event {
             Self::LinkRestored => "link_restored",
             Self::ExcitationLow => "excitation_low",
             Self::FilterReset => "filter_reset",
+            Self::CannotEstimate => "cannot_estimate",
         }
     }
 }

@@ -7,7 +7,7 @@ use super::{Stage, VehiclePipeline};
 use crate::model::MAX_ACTUATORS;
 use crate::model::calibrate::{CalibrationSample, calibrate_arx, calibrate_scaled};
 use crate::output::Sink;
-use crate::telemetry::profile::Dynamics;
+use crate::telemetry::profile::{Dynamics, VehicleKind};
 use crate::telemetry::{Profile, TelemetrySample};
 
 #[derive(Clone, Copy)]
@@ -26,9 +26,29 @@ const CALIBRATION_MAX_INTERVAL: f64 = 1.5;
 
 /// A calibration stretch shorter than this (s) is warned about.
 const SHORT_CALIBRATION_S: f64 = 10.0;
-/// A sample period (s) over which the stream is said to be too slow: the SITL manoeuvres
-/// decimated to 10 Hz are decided as at 50 Hz, at 4 Hz a motor's recovery read as stuck.
-const SLOW_PERIOD_S: f64 = 0.105;
+/// The time constant (s) of the autopilots' default attitude loops, which the outputs follow:
+/// ArduCopter's and TradHeli's angle P of 4.5 /s (ATC_ANG_RLL_P, ATC_ANG_PIT_P) for rotorcraft;
+/// ArduPlane's RLL2SRV_TCONST and PTCH2SRV_TCONST of 0.5 s for planes (PX4's are shorter:
+/// MC_ROLL_P 6.5 /s, FW_R_TC 0.4 s, so for PX4 the rule below is necessary, not sufficient).
+fn command_time_constant_s(kind: VehicleKind) -> f64 {
+    match kind {
+        VehicleKind::Multirotor | VehicleKind::Helicopter => 1.0 / 4.5,
+        VehicleKind::Plane => 0.5,
+    }
+}
+
+/// The longest sample period the model supports, as a fraction of the command time constant.
+/// The model holds each sample's outputs over the step to the next; an output following a
+/// first-order response of time constant `tau` averages over a step `dt` to within `dt/(2 tau)`
+/// of its change of the held value, so at `dt = tau/2` a quarter of every command change is
+/// misattributed: as much as the smallest loss decided (gain 0.75). Slower, no fault decision
+/// is supported.
+const MAX_PERIOD_PER_TIME_CONSTANT: f64 = 0.5;
+
+/// The slowest sample rate (Hz) a vehicle of `kind` can be estimated at.
+pub fn min_sample_rate_hz(kind: VehicleKind) -> f64 {
+    1.0 / (MAX_PERIOD_PER_TIME_CONSTANT * command_time_constant_s(kind))
+}
 
 /// Rate spread (standard deviation, rad/s) above which a calibration stretch manoeuvred: a
 /// steady SITL hover spreads 0.0014, the SITL manoeuvres 0.14-0.26.
@@ -84,6 +104,14 @@ pub(super) fn sample_period(ts: impl Iterator<Item = f64>) -> f64 {
         .filter(|x| (0.5 * quartile..=1.5 * quartile).contains(x))
         .collect();
     near[near.len() / 2]
+}
+
+fn kind_name(kind: VehicleKind) -> &'static str {
+    match kind {
+        VehicleKind::Multirotor => "multirotor",
+        VehicleKind::Helicopter => "helicopter",
+        VehicleKind::Plane => "plane",
+    }
 }
 
 impl VehiclePipeline {
@@ -142,15 +170,20 @@ impl VehiclePipeline {
 
     fn start_running(&mut self, profile: Profile, samples: &[StoredSample], sink: &mut dyn Sink) {
         let dt = sample_period(samples.iter().map(|s| s.t));
-        if dt > SLOW_PERIOD_S && !std::mem::replace(&mut self.warned_slow, true) {
-            sink.message(
-                self.sysid,
-                &format!(
-                    "warning: the samples come at {:.1} Hz (ATTITUDE with outputs every {:.0} ms): under 10 Hz the filters follow an actuator loosely and a class may be wrong; raise the stream rates (the ground station's, ArduPilot's SRn_/MAVn_ parameters, or --request-rates)",
+        let need_hz = min_sample_rate_hz(profile.vehicle);
+        if 1.0 / dt < need_hz {
+            let t = samples.last().map_or(0.0, |s| s.t);
+            self.cannot_estimate(
+                t,
+                format!(
+                    "the samples (rates with outputs) come at {:.1} Hz, every {:.0} ms; a {} needs >= {need_hz:.1} Hz, for its commands change within a step (the rule: docs/diagnosis.md); raise the stream rates (the ground station's, ArduPilot's SRn_/MAVn_ parameters, --request-rates) or the log's rates",
                     1.0 / dt,
-                    dt * 1e3
+                    dt * 1e3,
+                    kind_name(profile.vehicle)
                 ),
+                sink,
             );
+            return;
         }
         let l = profile.actuators.len();
         let mut profile = profile;
@@ -370,14 +403,18 @@ impl VehiclePipeline {
             ),
         );
         if !poor.is_empty() {
-            sink.message(
-                self.sysid,
-                &format!(
-                    "warning: the model fits {} worse than a constant: the profile ({}) may not be this vehicle's, or the stretch was not healthy flight; its estimates and decisions are not to be trusted",
+            let t = samples.last().map_or(0.0, |s| s.t);
+            self.cannot_estimate(
+                t,
+                format!(
+                    "the model fits {} worse than a constant on the calibration stretch ({:.1} Hz): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
                     poor.join(", "),
+                    1.0 / dt,
                     calibrated.name
                 ),
+                sink,
             );
+            return;
         }
         if !unexplained.is_empty() {
             sink.message(

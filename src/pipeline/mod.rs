@@ -129,8 +129,10 @@ pub struct VehiclePipeline {
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
     /// Said once that an output channel carries no PWM.
     warned_missing_output: bool,
-    /// Said once that the samples come too slowly.
-    warned_slow: bool,
+    /// The last calibration stretch's data could not support an estimate (`cannot_estimate`,
+    /// said; `failure` says why): no failure of the run, the summary says why, as for a log
+    /// without a flight.
+    unsupported: bool,
     /// The take-off last announced: a calibration retried in the same flight says so instead
     /// (a slow stream's failed fits repeated "airborne at t=49.43 s" five times).
     announced_takeoff: Option<f64>,
@@ -168,7 +170,7 @@ impl VehiclePipeline {
             seen_grounded: false,
             active: [None; MAX_ACTUATORS],
             warned_missing_output: false,
-            warned_slow: false,
+            unsupported: false,
             announced_takeoff: None,
             failure: None,
             before_reboot: None,
@@ -204,6 +206,9 @@ impl VehiclePipeline {
     pub fn why_not_estimating(&self, heartbeat: bool) -> Option<String> {
         if self.counters.steps > 0 {
             return None;
+        }
+        if self.unsupported {
+            return self.failure.clone();
         }
         // Samples were there but unusable: said first, or the landing (or the end of the
         // data) reads as the cause.
@@ -293,6 +298,24 @@ impl VehiclePipeline {
         self.failure = Some(why);
     }
 
+    /// The data of a calibration stretch cannot support an estimate: a `cannot_estimate`
+    /// decision at `t`, said once (again only after an estimate in between), kept for the
+    /// summary; no fault is decided. The next stretch is tried, silently (a live link's rates
+    /// may be raised); a stretch the user chose is not.
+    fn cannot_estimate(&mut self, t: f64, why: String, sink: &mut dyn Sink) {
+        if !std::mem::replace(&mut self.unsupported, true) {
+            let d = Decision::monitor(t, self.sysid, Event::CannotEstimate, why.clone());
+            sink.decision(&d);
+        }
+        let why = format!("cannot estimate: {why}");
+        if self.cfg.calibrate_until.is_some() {
+            self.set_stage(Stage::Failed, &why);
+        } else {
+            self.set_stage(Stage::Grounded, &why);
+        }
+        self.failure = Some(why);
+    }
+
     /// Move to another stage, said at debug level with the reason.
     fn set_stage(&mut self, stage: Stage, why: &str) {
         let from = self.stage_name();
@@ -324,6 +347,7 @@ impl VehiclePipeline {
     /// Why the run failed, once it has (the estimation stopped for good).
     pub fn failed(&self) -> Option<&str> {
         match self.stage {
+            Stage::Failed if self.unsupported => None,
             Stage::Failed => Some(self.failure.as_deref().unwrap_or("failed")),
             _ => None,
         }
@@ -331,9 +355,12 @@ impl VehiclePipeline {
 
     pub fn stage_name(&self) -> &'static str {
         match self.stage {
+            Stage::Running(_) => "estimating",
+            Stage::Grounded | Stage::Calibrating { .. } | Stage::Failed if self.unsupported => {
+                "cannot estimate"
+            }
             Stage::Grounded => "waiting for flight",
             Stage::Calibrating { .. } => "calibrating",
-            Stage::Running(_) => "estimating",
             Stage::Failed => "failed",
         }
     }

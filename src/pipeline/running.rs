@@ -216,6 +216,7 @@ impl VehiclePipeline {
         sink: &mut dyn Sink,
     ) {
         let l = calibrated.actuators.len();
+        self.unsupported = false;
         let filters = match build(&calibrated, dt) {
             Ok(f) => f,
             Err(e) => {

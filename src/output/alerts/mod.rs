@@ -140,6 +140,10 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
         Event::Cleared => (MavSeverity::MAV_SEVERITY_NOTICE, fit("cleared", "")),
         Event::ExcitationLow => return None,
         Event::FilterReset => (MavSeverity::MAV_SEVERITY_WARNING, "AHC filter reset".into()),
+        Event::CannotEstimate => (
+            MavSeverity::MAV_SEVERITY_WARNING,
+            "AHC cannot estimate".into(),
+        ),
         Event::LinkLost | Event::LinkRestored => return None,
     };
     Some((sev, cut_bytes(text.trim(), TEXT_BYTES).to_string()))

@@ -331,7 +331,9 @@ pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], s
             let style = match d.event {
                 Event::Fault | Event::Changed => Style::default().fg(Color::Red),
                 Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
-                Event::LinkLost | Event::FilterReset => Style::default().fg(Color::Yellow),
+                Event::LinkLost | Event::FilterReset | Event::CannotEstimate => {
+                    Style::default().fg(Color::Yellow)
+                }
                 Event::ExcitationLow => Style::default().fg(Color::DarkGray),
             };
             // The vehicle shown is the selected one: its id on every line only cuts the rest.
