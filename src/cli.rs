@@ -56,10 +56,30 @@ pub enum Command {
     /// Identify a vehicle's model (D, G, c and the noise levels) from a healthy stretch of a
     /// telemetry log and write it as a profile (usable with --profile FILE).
     Calibrate(CalibrateArgs),
-    /// Replay a telemetry log (.tlog from any ground station) through both filters and the
+    /// Replay a log (a ground station's .tlog, an ArduPilot DataFlash .bin, a PX4 .ulg) through both filters and the
     /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
     /// decisions, and counts of everything dropped).
     Replay(ReplayArgs),
+    /// Replay labelled logs and score the fault decisions against their truth: per log the
+    /// first fault decision at or after the onset (actuator, delay, class), the fault decisions
+    /// before it, and per dataset the totals (healthy flights' fault decisions per flight hour,
+    /// per-flight precision and recall, a published figure beside ours where the truth file
+    /// quotes one). The truth format and the scoring rules: docs/results.md, "Dataset
+    /// benchmark".
+    Benchmark(BenchmarkArgs),
+}
+
+#[derive(clap::Args)]
+pub struct BenchmarkArgs {
+    /// Truth files (TOML), one per dataset, e.g. tests/datasets/*.toml.
+    #[arg(required = true, value_name = "TRUTH.toml")]
+    pub truth: Vec<PathBuf>,
+    /// The folder the truth files' `file` paths are under.
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// Also write the results as one JSON document.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -211,7 +231,8 @@ pub struct CalibrateArgs {
 
 #[derive(clap::Args)]
 pub struct ReplayArgs {
-    /// The .tlog file.
+    /// The log: a ground station's .tlog, an ArduPilot DataFlash .bin or a PX4 .ulg (told by
+    /// content, not by the name).
     pub file: PathBuf,
     #[command(flatten)]
     pub run: RunArgs,

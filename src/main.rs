@@ -46,5 +46,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Demo(a) => app::monitor::demo(a),
         Command::Calibrate(a) => app::calibrate::run(a),
         Command::Replay(a) => app::replay::run(a),
+        Command::Benchmark(a) => app::benchmark::run(a),
     }
 }

@@ -34,6 +34,7 @@ macro_rules! outln {
     };
 }
 
+pub mod benchmark;
 pub mod calibrate;
 pub mod eval;
 mod fly;

@@ -2,6 +2,7 @@
 //! scored against the simulator's truth. Pure: printing and plotting live in `output/`.
 
 pub mod bank;
+pub mod datasets;
 pub mod thresholds;
 pub mod vehicle;
 

@@ -76,6 +76,44 @@ pub enum LogError {
     Malformed(String),
 }
 
+/// One item of a log, in the log's order: a telemetry log's MAVLink frame, or a record of a
+/// vehicle's own log (its one vehicle's, on its own clock).
+pub enum LogItem<'a> {
+    Frame(&'a crate::protocol::Frame),
+    Record(&'a crate::telemetry::Record),
+}
+
+/// Any log, its format told by content, item by item; `at` is told the bytes read so far
+/// (for progress). A telemetry log's report carries its reader's counters and size.
+pub fn read_log(
+    path: &std::path::Path,
+    each: &mut dyn FnMut(LogItem<'_>),
+    at: &mut dyn FnMut(u64),
+) -> Result<(LogFormat, LogReport), LogError> {
+    let format = sniff(std::fs::File::open(path)?)?;
+    let report = match format {
+        LogFormat::Tlog => {
+            let mut reader = super::TlogReader::open(path)?;
+            while let Some((_, frame)) = reader.next_frame()? {
+                each(LogItem::Frame(&frame));
+                at(reader.position());
+            }
+            LogReport {
+                counters: reader.counters,
+                bytes: reader.position(),
+                ..LogReport::default()
+            }
+        }
+        LogFormat::DataFlash => super::dataflash::read(
+            std::io::BufReader::new(std::fs::File::open(path)?),
+            &mut |r| each(LogItem::Record(r)),
+            at,
+        )?,
+        LogFormat::ULog => super::ulog::read(path, &mut |r| each(LogItem::Record(r)))?,
+    };
+    Ok((format, report))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

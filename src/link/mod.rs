@@ -12,6 +12,6 @@ mod udp;
 pub mod ulog;
 
 pub use conn::{Link, Received};
-pub use logfile::{LogError, LogFormat, LogReport, sniff};
+pub use logfile::{LogError, LogFormat, LogItem, LogReport, read_log, sniff};
 pub use spec::{ConnError, ConnSpec};
 pub use tlog::{TlogReader, TlogWriter};

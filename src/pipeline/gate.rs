@@ -21,6 +21,10 @@ pub struct FlightGate {
     pub longest_airborne: Option<(f64, f64)>,
     /// Samples taken as airborne.
     pub airborne_samples: u64,
+    /// Time airborne in all (s): the sum of the steps between consecutive airborne samples,
+    /// each at most `MAX_AIRBORNE_STEP_S` (a hole in the data is not flight time seen).
+    pub airborne_s: f64,
+    last_airborne_t: Option<f64>,
 }
 
 impl FlightGate {
@@ -34,6 +38,8 @@ impl FlightGate {
 /// joined a flight under way (a real vehicle spends longer than this on the ground between
 /// boot and take-off; a simulator starts airborne at boot).
 const JOINED_IN_FLIGHT_S: f64 = 30.0;
+/// Longest step between two airborne samples counted as flight time (s).
+const MAX_AIRBORNE_STEP_S: f64 = 1.0;
 pub(super) const JOINED_WARNING: &str = "no take-off seen";
 
 impl VehiclePipeline {
@@ -41,6 +47,7 @@ impl VehiclePipeline {
         self.gate.samples += 1;
         if !s.armed {
             self.armed_since = None;
+            self.gate.last_airborne_t = None;
             return false;
         }
         let since = *self.armed_since.get_or_insert(s.t);
@@ -55,6 +62,14 @@ impl VehiclePipeline {
             None => s.t - since >= self.cfg.armed_airborne_s,
         };
         g.airborne_samples += u64::from(airborne);
+        if airborne {
+            if let Some(prev) = g.last_airborne_t {
+                g.airborne_s += (s.t - prev).clamp(0.0, MAX_AIRBORNE_STEP_S);
+            }
+            g.last_airborne_t = Some(s.t);
+        } else {
+            g.last_airborne_t = None;
+        }
         airborne
     }
 
@@ -141,13 +156,16 @@ impl VehiclePipeline {
                     "calibrating"
                 };
                 if self.announced_takeoff.replace(since) == Some(since) {
-                    sink.message(
-                        self.sysid,
-                        &format!(
-                            "{next} again from t={:.2} s (in the flight since t={since:.2} s)",
-                            s.t
-                        ),
-                    );
+                    // A stretch the data could not support was said once; its retries are not.
+                    if !self.unsupported {
+                        sink.message(
+                            self.sysid,
+                            &format!(
+                                "{next} again from t={:.2} s (in the flight since t={since:.2} s)",
+                                s.t
+                            ),
+                        );
+                    }
                 } else {
                     sink.message(
                         self.sysid,

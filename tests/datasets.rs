@@ -1,0 +1,110 @@
+//! `ahcmon benchmark` on the SITL dataset (its logs are under replay/tlogs, at the same paths
+//! as in the external data), end to end: the truth file, the replays, the table and the JSON.
+//! The whole benchmark (ALFA, RflyMAD, the cut propellers) is `benches/datasets.sh`.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn manifest(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+fn ahcmon(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Each SITL flight's fault is named on its own output after the onset, none before: the
+/// baseline of docs/results.md, which the diagnosis redesign must keep.
+#[test]
+fn the_sitl_dataset_is_scored_against_its_truth() {
+    let dir = common::temp_dir("datasets_sitl");
+    let json = dir.join("sitl.json");
+    let truth = manifest("tests/datasets/sitl.toml");
+    let data = manifest("replay/tlogs");
+    let (code, out, err) = ahcmon(&[
+        "benchmark",
+        truth.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let runs: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let sitl = &runs[0];
+    assert_eq!(sitl["dataset"], "sitl");
+    let cases = sitl["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 4);
+    for c in cases {
+        let first = &c["first_after_onset"];
+        assert_eq!(c["outcome"], "detected", "{c}");
+        assert_eq!(c["faults_before_onset"], 0, "{c}");
+        // The fault's own output, within 5 s of the onset (the "named within 5 s").
+        let delay = first["delay_s"].as_f64().unwrap();
+        assert!((0.0..5.0).contains(&delay), "{c}");
+        assert_eq!(first["right"], true, "{c}");
+        assert!(c["samples"].as_u64().unwrap() > 1000, "{c}");
+        assert!(c["airborne_s"].as_f64().unwrap() > 60.0, "{c}");
+    }
+    let t = &sitl["totals"];
+    assert_eq!(
+        (t["detected"].as_u64(), t["missed"].as_u64()),
+        (Some(4), Some(0))
+    );
+    assert_eq!(t["recall_pct"], 100.0);
+    // The table says the same, one row a case and the totals.
+    assert_eq!(out.matches(" detected ").count(), 4, "{out}");
+    assert!(out.contains("totals: 4 fault flights: 4 detected"), "{out}");
+}
+
+/// Every truth file parses (unknown keys are errors), and a log missing from `--data` stops
+/// the benchmark before anything is replayed or written.
+#[test]
+fn truth_files_are_checked_before_anything_runs() {
+    let dir = common::temp_dir("datasets_checked");
+    let json = dir.join("out.json");
+    let truths: Vec<PathBuf> = std::fs::read_dir(manifest("tests/datasets"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    assert_eq!(truths.len(), 4, "{truths:?}");
+    for t in &truths {
+        let text = std::fs::read_to_string(t).unwrap();
+        ahcmon::eval::datasets::DatasetTruth::from_toml(&text, &t.display().to_string()).unwrap();
+    }
+    // replay/tlogs holds the SITL logs only: the other datasets' logs are missing there.
+    let alfa = manifest("tests/datasets/alfa.toml");
+    let (code, out, err) = ahcmon(&[
+        "benchmark",
+        alfa.to_str().unwrap(),
+        "--data",
+        manifest("replay/tlogs").to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{out}{err}");
+    assert!(err.contains("no such file under --data"), "{err}");
+    assert!(out.is_empty() && !json.exists(), "{out}");
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "dataset = \"x\"\ndescription = \"y\"\n[[case]]\nfile = \"a.tlog\"\nonset = 3\n",
+    )
+    .unwrap();
+    let (code, _, err) = ahcmon(&["benchmark", bad.to_str().unwrap(), "--data", "."]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown field `onset`"), "{err}");
+}
