@@ -158,6 +158,7 @@ fn calibration_recovers_damping_and_effectiveness() {
                 u: &s.u[..l],
                 az: az.then_some(s.y[3]),
                 follows_previous: true,
+                measured: true,
                 step: k as u64,
             })
             .collect();
@@ -490,6 +491,7 @@ fn calibration_leaves_out_the_steps_across_gaps() {
                 u: &s.u[..l],
                 az: None,
                 follows_previous: !(marked && k > 0 && lost(k - 1)),
+                measured: true,
                 step: k as u64,
             })
             .collect();
@@ -558,6 +560,7 @@ fn gusty_calibrations(
                     u: &s.u[..l],
                     az: None,
                     follows_previous: !(k > 0 && gone(k - 1)),
+                    measured: true,
                     step: k as u64,
                 })
                 .collect();

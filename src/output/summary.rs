@@ -87,13 +87,14 @@ pub fn render(
         let pc = &p.counters;
         let _ = writeln!(
             s,
-            "  pipeline: {}; {} filter steps, {} gaps while estimating ({} lost periods coasted over, {} re-measured rates after longer ones), {} while calibrating, {} filter resets after a failed step, {} samples without a_z, {} without an actuator's PWM",
+            "  pipeline: {}; {} filter steps, {} gaps while estimating ({} lost periods coasted over, {} re-measured rates after longer ones), {} while calibrating ({} lost samples filled in), {} filter resets after a failed step, {} samples without a_z, {} without an actuator's PWM",
             p.stage_name(),
             pc.steps,
             pc.gaps,
             pc.coasted,
             pc.reseats,
             pc.calibration_gaps,
+            pc.calibration_filled,
             pc.filter_errors,
             pc.missing_az,
             pc.missing_output

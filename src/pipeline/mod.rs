@@ -91,6 +91,8 @@ pub struct PipelineCounters {
     /// Intervals of more than 1.5 sample periods in the calibration stretch (the steps across
     /// them are left out of the fit).
     pub calibration_gaps: u64,
+    /// Samples filled into short holes of a calibration stretch (history for the fit only).
+    pub calibration_filled: u64,
     /// Samples without a_z when the model measures it: skipped while estimating, left out of
     /// the a_z fit (not the rates') while calibrating.
     pub missing_az: u64,

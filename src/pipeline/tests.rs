@@ -355,8 +355,9 @@ fn a_failed_calibration_is_tried_again_on_the_next_stretch() {
     assert!(p.counters.steps > 100, "{:?}", p.counters);
 }
 
-/// One sample in ten lost during the calibration stretch: every hole is counted and said
-/// once, and the fit on what is left scales the axes as the fit on the whole stretch does.
+/// One sample in ten lost during the calibration stretch: every lost sample is filled in
+/// (each hole is one period, well inside the bound), counted and said once, no gap is left,
+/// and the fit scales the axes as the fit on the whole stretch does.
 #[test]
 fn calibration_counts_the_holes_and_fits_around_them() {
     let (whole, said_whole, _) = fly_quad(false);
@@ -365,16 +366,27 @@ fn calibration_counts_the_holes_and_fits_around_them() {
         assert!(matches!(p.stage, Stage::Running(_)), "{said:?}");
     }
     assert_eq!(whole.counters.calibration_gaps, 0);
-    assert!(!said_whole.0.iter().any(|m| m.contains("gaps")));
-    // Holes at the very start or end of the stretch may fall outside what it kept.
-    let counted = lossy.counters.calibration_gaps;
+    assert_eq!(whole.counters.calibration_filled, 0);
     assert!(
-        counted <= lost && counted + 2 >= lost && counted >= 90,
-        "{counted} of {lost}"
+        !said_whole
+            .0
+            .iter()
+            .any(|m| m.contains("gaps") || m.contains("filled"))
     );
-    let gaps: Vec<_> = said.0.iter().filter(|m| m.contains("gaps")).collect();
-    assert_eq!(gaps.len(), 1, "{:?}", said.0);
-    assert!(gaps[0].contains(&format!("{counted} gaps")), "{}", gaps[0]);
+    // Holes at the very start or end of the stretch may fall outside what it kept.
+    let filled = lossy.counters.calibration_filled;
+    assert!(
+        filled <= lost && filled + 2 >= lost && filled >= 90,
+        "{filled} of {lost}"
+    );
+    assert_eq!(lossy.counters.calibration_gaps, 0);
+    let told: Vec<_> = said.0.iter().filter(|m| m.contains("filled")).collect();
+    assert_eq!(told.len(), 1, "{:?}", said.0);
+    assert!(
+        told[0].contains(&format!("{filled} lost samples")),
+        "{}",
+        told[0]
+    );
     let (a, b) = (whole.fit.unwrap().scale, lossy.fit.unwrap().scale);
     for axis in 0..3 {
         assert!((a[axis] - b[axis]).abs() < 0.02, "scales {a:?} and {b:?}");

@@ -62,6 +62,9 @@ pub struct CalibrationSample<'a> {
     /// period, rounded): samples on either side of a hole are as many steps apart as periods
     /// passed. Only differences are used.
     pub step: u64,
+    /// Measured, not filled into a short hole of the telemetry: a filled sample serves as a
+    /// row's history, never as the increment a row fits.
+    pub measured: bool,
 }
 
 /// For every sample, the index where its unbroken run of samples starts.
@@ -78,11 +81,13 @@ fn run_starts(samples: &[CalibrationSample]) -> Vec<usize> {
     starts
 }
 
-/// The indices `k` for which samples `k - before ..= k + after` are one unbroken run.
+/// The indices `k` for which samples `k - before ..= k + after` are one unbroken run and the
+/// samples a row fits (`k ..= k + after`) were measured.
 fn unbroken_rows(samples: &[CalibrationSample], before: usize, after: usize) -> Vec<usize> {
     let starts = run_starts(samples);
     (before..samples.len().saturating_sub(after))
         .filter(|&k| starts[k + after] + before <= k)
+        .filter(|&k| samples[k..=k + after].iter().all(|s| s.measured))
         .collect()
 }
 

@@ -55,6 +55,7 @@ fn calibrate_arx_recovers_a_known_model() {
             u: &u[k],
             az: None,
             follows_previous: true,
+            measured: true,
             step: k as u64,
         })
         .collect();
@@ -130,4 +131,22 @@ fn the_a_z_scale_is_taken_only_when_the_data_determine_it() {
     let still = fit(0.05, 50.0);
     assert!(!still.scaled && still.scale == 1.0, "{:?}", still.scale);
     assert_eq!(still.vertical, base.to_vec());
+}
+
+/// A filled sample is history only: no row fits its increment, the runs go on through it.
+#[test]
+fn a_filled_sample_is_no_rows_target() {
+    let u = [0.5; 2];
+    let samples: Vec<CalibrationSample> = (0..8)
+        .map(|k| CalibrationSample {
+            rates: [0.0; 3],
+            u: &u,
+            az: None,
+            follows_previous: k > 0,
+            measured: k != 4,
+            step: k as u64,
+        })
+        .collect();
+    assert_eq!(unbroken_rows(&samples, 2, 0), [2, 3, 5, 6, 7]);
+    assert_eq!(unbroken_rows(&samples, 1, 1), [1, 2, 5, 6]);
 }
