@@ -132,6 +132,9 @@ pub struct VehicleAssembler {
     pub counters: TelemetryCounters,
     rates: Option<Stamped<([f64; 3], [f64; 3])>>,
     rates_used: bool,
+    /// The rates' stamp is ATTITUDE's millisecond `time_boot_ms`, coarser than the outputs'
+    /// microsecond one: a co-timed sample then takes the outputs' stamp (`pairing.rs`).
+    rates_ms_clock: bool,
     /// The rate instant before `rates`: with it, outputs stamped between two rate instants
     /// get rates interpolated to their own instant (`pairing.rs`).
     rates_prev: Option<Stamped<([f64; 3], [f64; 3])>>,
@@ -211,6 +214,7 @@ impl VehicleAssembler {
             counters: TelemetryCounters::default(),
             rates: None,
             rates_used: false,
+            rates_ms_clock: false,
             rates_prev: None,
             outputs: None,
             outputs_used: false,
@@ -348,6 +352,7 @@ impl VehicleAssembler {
                 let t = f64::from(a.time_boot_ms) * 1e-3;
                 let rates = [v[0], v[1], v[2]].map(f64::from);
                 let att = [v[3], v[4], v[5]].map(f64::from);
+                self.rates_ms_clock = true;
                 self.on_rates(t, rates, att)
             }
             MavMessage::SERVO_OUTPUT_RAW(s) => {

@@ -2,7 +2,8 @@
 //!
 //! Co-timed streams (ArduPilot stamps ATTITUDE, RATE and the outputs from one loop) pair
 //! directly: rates and outputs within the skew tolerance are one sample at the rates'
-//! instant. Streams that are not co-timed (outputs logged slower than the rates, PX4's
+//! instant, or at the outputs' when the rates carry only a millisecond stamp (ATTITUDE's
+//! `time_boot_ms`) and the outputs a microsecond one. Streams that are not co-timed (outputs logged slower than the rates, PX4's
 //! outputs a few ms after the gyro sample, a slow telemetry stream) pair by interpolation:
 //! outputs stamped between two *consecutive* rate instants (no more than 1.5 rate periods
 //! apart, so no rate instant was lost between them) make a sample at the outputs' own
@@ -131,7 +132,18 @@ impl VehicleAssembler {
         }
         self.rates_used = true;
         self.outputs_used = true;
-        Some(self.sample(rates.t, rates.v.0, rates.v.1, outputs.v))
+        // The finer clock of the two: a millisecond stamp cannot carry a 2.5 ms period (at
+        // 400 Hz ATTITUDE's intervals read 2 and 3 ms), the outputs' microsecond one can.
+        let t = if self.rates_ms_clock {
+            outputs.t
+        } else {
+            rates.t
+        };
+        if self.last_sample_t.is_some_and(|last| t <= last) {
+            self.counters.out_of_order += 1;
+            return None;
+        }
+        Some(self.sample(t, rates.v.0, rates.v.1, outputs.v))
     }
 
     /// Outputs between two consecutive rate instants: a sample at the outputs' instant.
