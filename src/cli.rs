@@ -211,7 +211,7 @@ pub struct DemoArgs {
 
 #[derive(clap::Args)]
 pub struct CalibrateArgs {
-    /// The .tlog file.
+    /// The log: a .tlog, an ArduPilot DataFlash .bin or a PX4 .ulg (told by content).
     pub file: PathBuf,
     /// End of the healthy stretch (vehicle time, s since boot, as in the decisions' `t`);
     /// it starts when the vehicle is airborne and settled.

@@ -260,3 +260,49 @@ fn damaged_own_logs_are_read_up_to_the_damage_and_say_so() {
         }
     }
 }
+
+/// `calibrate` reads a vehicle's own log as `replay` does: a PX4 ULog's healthy stretch gives
+/// a profile that `replay` then uses; a DataFlash log whose model fits worse than a constant
+/// is refused with that reason, not written.
+#[test]
+#[ignore = "needs the external logs (../shared/data or AHCMON_SHARED_DATA): cargo test --release --test logs -- --ignored"]
+fn calibrate_reads_own_logs() {
+    let dir = common::temp_dir("logs_calibrate");
+    let profile = dir.join("p.toml");
+    let ulog = shared_data().join("rflymad/TestCase_1_2000000000.ulg");
+    let out = ahcmon()
+        .arg("calibrate")
+        .arg(&ulog)
+        .args(["--until", "50", "-o"])
+        .arg(&profile)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("quad-x identified from"), "{stdout}");
+    let replayed = ahcmon()
+        .arg("replay")
+        .arg(&ulog)
+        .arg("--profile")
+        .arg(&profile)
+        .output()
+        .unwrap();
+    assert!(replayed.status.success());
+    assert!(String::from_utf8_lossy(&replayed.stdout).contains("quad-x-calibrated"));
+    let bin = shared_data().join("rrc_prop_cut/Hover__good_prop_hover_1.BIN");
+    let refused = dir.join("refused.toml");
+    let out = ahcmon()
+        .arg("calibrate")
+        .arg(&bin)
+        .args(["--until", "120", "-o"])
+        .arg(&refused)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("worse than a constant"));
+    assert!(!refused.exists());
+}

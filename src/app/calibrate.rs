@@ -1,9 +1,9 @@
-//! `ahcmon calibrate`: a vehicle's model identified from a healthy stretch of a log, written
-//! as a profile.
+//! `ahcmon calibrate`: a vehicle's model identified from a healthy stretch of a log (a tlog,
+//! a DataFlash or a ULog log), written as a profile.
 
 use super::{InputFileError, UsageError, check_outputs, file_input, positive};
 use crate::cli::{CalibrateArgs, RunArgs};
-use ahcmon::link::TlogReader;
+use ahcmon::link::{LogError, LogItem, read_log};
 use ahcmon::monitor::Monitor;
 use ahcmon::output::jsonl::Outputs;
 use anyhow::Context;
@@ -34,7 +34,6 @@ fn calibrate(
         path: file.display().to_string(),
         source,
     };
-    let mut reader = TlogReader::open(file).map_err(input_error)?;
     let args = RunArgs {
         profile: profile.map(str::to_string),
         output: Default::default(),
@@ -49,34 +48,47 @@ fn calibrate(
     let mut found = None;
     // Systems whose attitude the log holds: the vehicles a --sysid could name.
     let mut vehicles = std::collections::BTreeSet::new();
-    let mut note_vehicle = |frame: &ahcmon::protocol::Frame| {
-        if matches!(frame.msg, ahcmon::protocol::MavMessage::ATTITUDE(_)) {
-            vehicles.insert(frame.sysid);
-        }
-    };
-    while let Some((_, frame)) = reader.next_frame().map_err(input_error)? {
-        note_vehicle(&frame);
-        // Another vehicle's frames would run its whole pipeline, decisions and all.
-        if only.is_some_and(|s| s != frame.sysid) {
-            continue;
-        }
-        monitor.on_frame(&frame, &mut files);
-        if let Some((sysid, p)) = monitor
-            .pipelines
-            .iter()
-            .find(|(id, p)| only.is_none_or(|s| s == **id) && (p.fit.is_some() || p.arx.is_some()))
-        {
-            found = Some((*sysid, p.profile().cloned(), p.fit.clone(), p.arx.clone()));
-            break;
-        }
+    // Any format, told by content; a vehicle's own log is one vehicle, sysid 1. Once a
+    // stretch is fitted the rest is only read (a tlog's other vehicles are named below).
+    let read = read_log(
+        file,
+        &mut |item| {
+            let sysid = match item {
+                LogItem::Frame(frame) => {
+                    if matches!(frame.msg, ahcmon::protocol::MavMessage::ATTITUDE(_)) {
+                        vehicles.insert(frame.sysid);
+                    }
+                    frame.sysid
+                }
+                LogItem::Record(_) => {
+                    vehicles.insert(1);
+                    1
+                }
+            };
+            // Another vehicle's frames would run its whole pipeline, decisions and all.
+            if found.is_some() || only.is_some_and(|s| s != sysid) {
+                return;
+            }
+            match item {
+                LogItem::Frame(frame) => monitor.on_frame(frame, &mut files),
+                LogItem::Record(r) => monitor.on_record(1, r, &mut files),
+            }
+            if let Some((sysid, p)) = monitor.pipelines.iter().find(|(id, p)| {
+                only.is_none_or(|s| s == **id) && (p.fit.is_some() || p.arx.is_some())
+            }) {
+                found = Some((*sysid, p.profile().cloned(), p.fit.clone(), p.arx.clone()));
+            }
+        },
+        &mut |_| {},
+    );
+    match read {
+        Ok(_) => {}
+        Err(LogError::Io(source)) => return Err(input_error(source).into()),
+        Err(e) => return Err(UsageError(format!("{}: {e}", file.display())).into()),
     }
     if let Some((chosen, ..)) = &found
         && only.is_none()
     {
-        // Read on, decoding only, to learn which other vehicles the log holds.
-        while let Ok(Some((_, frame))) = reader.next_frame() {
-            note_vehicle(&frame);
-        }
         let others: Vec<String> = vehicles
             .iter()
             .filter(|id| *id != chosen)
