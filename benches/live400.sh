@@ -35,7 +35,7 @@ for s in quad-x-motor2-loe-live quad-x-motor2-loe-live heli-swash2-loe-live heli
   "$bin" -q sim --scenario "$s" --seed "$i" --sysid "$i" --tlog "$tmp/fifty$i.tlog" > /dev/null
   "$bin" -q replay "$tmp/fifty$i.tlog" --estimates "$tmp/fifty$i.jsonl" > /dev/null
 done
-grep -E "^vehicle sysid|pipeline:" "$tmp/summary.txt" | sed -E 's/(telemetry: [0-9]+ samples).*/\1/; s/(gaps while estimating).*/\1/'
+grep -E "^link:|^vehicle sysid|pipeline:|pairing:" "$tmp/summary.txt" | sed -E "s/ \(0 messages of the new boots.*(; [0-9]+ frames missing)/\1/; s/ \(lost on the link.*//; s/(gaps while estimating).*/\1/"
 python3 - "$tmp" <<'PY'
 import json, statistics, sys
 tmp = sys.argv[1]

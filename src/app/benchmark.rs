@@ -236,7 +236,7 @@ fn render(runs: &[DatasetRun]) -> String {
                 short(c.score.file.rsplit('/').next().unwrap_or_default(), 52),
                 head(&c.score.truth, 30),
                 outcome_name(c.score.outcome),
-                short(&first, 28),
+                head(&first, 28),
                 opt(
                     c.score.first_after_onset.as_ref().and_then(|f| f.delay_s),
                     " s"

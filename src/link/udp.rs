@@ -12,10 +12,29 @@ pub(super) struct Udp {
     learn_peer: bool,
 }
 
+/// Receive buffer asked of the kernel (it caps it at `net.core.rmem_max`). The default,
+/// about 200 KiB on Linux, overflows when the monitor is busy for a few ms while several
+/// vehicles stream at 400 Hz (about 100 datagrams lost per vehicle a minute, measured by
+/// `benches/live400.sh` against the kernel's RcvbufErrors); 4 MiB holds about a second of it.
+const RECEIVE_BUFFER_BYTES: usize = 4 << 20;
+
+/// A UDP socket bound to `addr` with the larger receive buffer (best effort: a kernel that
+/// refuses keeps its default).
+fn bind(addr: SocketAddr) -> std::io::Result<UdpSocket> {
+    use socket2::{Domain, Protocol, Socket, Type};
+    let sock = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
+    if let Err(e) = sock.set_recv_buffer_size(RECEIVE_BUFFER_BYTES) {
+        tracing::debug!("UDP receive buffer left at the kernel's default: {e}");
+    }
+    sock.bind(&addr.into())?;
+    sock.set_nonblocking(true)?;
+    UdpSocket::from_std(sock.into())
+}
+
 impl Udp {
     pub(super) async fn listen(addr: SocketAddr) -> std::io::Result<Self> {
         Ok(Self {
-            sock: UdpSocket::bind(addr).await?,
+            sock: bind(addr)?,
             peer: None,
             learn_peer: true,
         })
@@ -24,7 +43,7 @@ impl Udp {
     /// A socket on an ephemeral port of `local` that sends to `peer`.
     pub(super) async fn send_to(local: SocketAddr, peer: SocketAddr) -> std::io::Result<Self> {
         Ok(Self {
-            sock: UdpSocket::bind(local).await?,
+            sock: bind(local)?,
             peer: Some(peer),
             learn_peer: false,
         })
