@@ -7,17 +7,7 @@ mod common;
 
 use std::process::Command;
 
-fn ahcmon(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::ahcmon;
 
 fn assert_one_line_error(args: &[&str], must_contain: &[&str]) {
     let (code, _, err) = ahcmon(args);
@@ -1061,27 +1051,25 @@ fn joining_a_flight_under_way_is_warned_about() {
     assert!(!err.contains("no take-off seen"), "{err}");
 }
 
-/// One ATTITUDE in three lost: the sample period is still 20 ms (the median interval read
-/// 40 ms, and the filters ran 20 ms steps as 40 ms ones), the calibration fills the one-sample
-/// holes in and completes, and motor 1's fault (t=113.47 s) is the first named, none before.
+/// One ATTITUDE in three lost, every third: the sample period is still 20 ms (the median
+/// interval read 40 ms, and the filters ran 20 ms steps as 40 ms ones). The holes are filled,
+/// but no three measured samples follow each other, which a fit row of the scaled geometry
+/// needs (its target and instrument are measured); the calibration says so.
 #[test]
-fn a_link_losing_one_sample_in_three_keeps_the_period_and_calibrates_through_it() {
+fn a_link_losing_one_sample_in_three_keeps_the_period_and_says_why_it_cannot_calibrate() {
     let (lossy, _) = lossy_copy(
         &common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog"),
         30,
         3,
         "cli_lossy_third",
     );
-    let (_, err, faults) = replay_faults(&lossy);
+    let (code, _, err) = ahcmon(&["replay", lossy.to_str().unwrap(), "--headless"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("dt 40"), "{err}");
     assert!(
-        !err.contains("dt 40") && err.contains("dt 20.0 ms"),
+        err.contains("lost samples leave too few unbroken runs"),
         "{err}"
     );
-    assert!(err.contains("lost samples filled in"), "{err}");
-    let first = faults.first().unwrap_or_else(|| panic!("no fault: {err}"));
-    let t = first["t"].as_f64().unwrap();
-    assert_eq!(first["actuator"], "motor1", "{faults:?}");
-    assert!((113.47..113.47 + 5.0).contains(&t), "{faults:?}");
 }
 
 /// A helicopter's identified model on a link losing one ATTITUDE in five: the holes are

@@ -6,23 +6,12 @@
 mod common;
 
 use std::path::PathBuf;
-use std::process::Command;
 
 fn manifest(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel)
 }
 
-fn ahcmon(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::ahcmon;
 
 /// Each SITL flight's fault is named on its own output after the onset, none before: the
 /// baseline of docs/results.md, which the diagnosis redesign must keep.
@@ -107,4 +96,19 @@ fn truth_files_are_checked_before_anything_runs() {
     let (code, _, err) = ahcmon(&["benchmark", bad.to_str().unwrap(), "--data", "."]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("unknown field `onset`"), "{err}");
+    // --json naming an input is refused before anything is written.
+    let sitl = manifest("tests/datasets/sitl.toml");
+    let copy = dir.join("sitl.toml");
+    std::fs::copy(&sitl, &copy).unwrap();
+    let before = std::fs::read(&copy).unwrap();
+    let (code, _, err) = ahcmon(&[
+        "benchmark",
+        copy.to_str().unwrap(),
+        "--data",
+        manifest("replay/tlogs").to_str().unwrap(),
+        "--json",
+        copy.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert_eq!(std::fs::read(&copy).unwrap(), before);
 }

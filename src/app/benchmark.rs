@@ -2,7 +2,7 @@
 //! fault decisions scored against the truth files (`ahcmon::eval::datasets`), one table on
 //! stdout and, with `--json`, the same as one JSON document.
 
-use super::{InputFileError, Progress, UsageError};
+use super::{InputFileError, Progress, UsageError, check_outputs};
 use crate::cli::BenchmarkArgs;
 use ahcmon::diagnose::vehicle::Decision;
 use ahcmon::eval::datasets::{
@@ -82,6 +82,18 @@ pub fn run(a: BenchmarkArgs) -> anyhow::Result<()> {
         }
         sets.push(truth);
     }
+    // The JSON names no log or truth file (it is created before the replays, to fail early).
+    let logs: Vec<std::path::PathBuf> = sets
+        .iter()
+        .flat_map(|t| t.cases.iter().map(|c| a.data.join(&c.file)))
+        .collect();
+    let inputs: Vec<&Path> = a
+        .truth
+        .iter()
+        .map(|p| p.as_path())
+        .chain(logs.iter().map(|p| p.as_path()))
+        .collect();
+    check_outputs(&inputs, &[("--json", a.json.as_deref())])?;
     if let Some(json) = &a.json {
         std::fs::write(json, "").with_context(|| format!("cannot write {}", json.display()))?;
     }

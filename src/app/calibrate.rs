@@ -82,7 +82,18 @@ fn calibrate(
         &mut |_| {},
     );
     match read {
-        Ok(_) => {}
+        Ok((_, report)) => {
+            for note in &report.notes {
+                tracing::warn!("log: {note}");
+            }
+        }
+        // Past the stretch the log was only read on to name its other vehicles.
+        Err(e) if found.is_some() => {
+            tracing::warn!(
+                "warning: {}: {e}, after the calibration stretch",
+                file.display()
+            );
+        }
         Err(LogError::Io(source)) => return Err(input_error(source).into()),
         Err(e) => return Err(UsageError(format!("{}: {e}", file.display())).into()),
     }

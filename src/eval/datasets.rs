@@ -1,6 +1,7 @@
 //! The dataset benchmark's scoring: public logs with their truth (`tests/datasets/*.toml`, one
 //! file per dataset, naming each log relative to a data root), and each case's fault decisions
-//! scored against it. Pure: reading the logs and printing live in `examples/datasets.rs`.
+//! scored against it. Pure: reading the logs and printing live in `ahcmon benchmark`
+//! (`src/app/benchmark.rs`).
 //!
 //! Per case, from the `fault` decisions only (monitor events are not decisions about an
 //! actuator):

@@ -278,7 +278,8 @@ impl VehiclePipeline {
             gaps += u64::from(!regular);
             let az = if measure_az { w[1].az } else { None };
             let keep = regular;
-            self.counters.missing_az += u64::from(regular && measure_az && az.is_none());
+            self.counters.missing_az +=
+                u64::from(regular && measured && measure_az && az.is_none());
             if keep {
                 let step = match last_kept {
                     None => 0,
@@ -318,10 +319,12 @@ impl VehiclePipeline {
         let base = profile.rate_params();
         // Too few usable samples where the stretch had many: the holes left too few runs.
         let holes_note = |e: &crate::model::calibrate::CalibrationError| match e {
-            crate::model::calibrate::CalibrationError::TooFew { .. } if gaps > 0 => format!(
-                "; the stretch had {} samples, but a fit row spans consecutive ones and its {gaps} gaps leave too few unbroken runs (the link loses too many)",
-                samples.len()
-            ),
+            crate::model::calibrate::CalibrationError::TooFew { .. } if gaps + filled > 0 => {
+                format!(
+                    "; the stretch had {} samples, but a fit row spans consecutive measured ones and its {gaps} gaps and {filled} lost samples leave too few unbroken runs (the link loses too many)",
+                    samples.len()
+                )
+            }
             // In flight time, which a stretch is chosen by.
             crate::model::calibrate::CalibrationError::TooFew { need, .. } => format!(
                 " (at a sample every {:.0} ms: {:.1} s of flight after the {} s settle)",

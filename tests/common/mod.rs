@@ -126,3 +126,16 @@ pub fn data(rel: &str) -> PathBuf {
         .join("replay/tlogs")
         .join(rel)
 }
+
+/// `ahcmon ARGS`: exit code, stdout, stderr.
+pub fn ahcmon(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}

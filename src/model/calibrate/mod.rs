@@ -82,12 +82,19 @@ fn run_starts(samples: &[CalibrationSample]) -> Vec<usize> {
 }
 
 /// The indices `k` for which samples `k - before ..= k + after` are one unbroken run and the
-/// samples a row fits (`k ..= k + after`) were measured.
+/// samples a row's target and instruments come from (`k - 1 ..= k + after`) were measured:
+/// a filled sample is a straight line through its neighbours, so as the far end of an
+/// increment it would make the target that line's slope, and as an instrument it would carry
+/// the regressor's own noise. Older history (the arx fit's earlier increments) may be filled.
 fn unbroken_rows(samples: &[CalibrationSample], before: usize, after: usize) -> Vec<usize> {
     let starts = run_starts(samples);
     (before..samples.len().saturating_sub(after))
         .filter(|&k| starts[k + after] + before <= k)
-        .filter(|&k| samples[k..=k + after].iter().all(|s| s.measured))
+        .filter(|&k| {
+            samples[k - before.min(1)..=k + after]
+                .iter()
+                .all(|s| s.measured)
+        })
         .collect()
 }
 
@@ -177,10 +184,12 @@ pub fn calibrate(
         quality.residual_std.push(sd);
     }
     if samples.iter().all(|s| s.az.is_some()) {
+        // Measured samples only: a filled a_z is a straight line, not a measurement.
+        let measured: Vec<&CalibrationSample> = samples.iter().filter(|s| s.measured).collect();
         let cols = l + fit_offset as usize;
-        let mut x = DMatrix::<f64>::zeros(samples.len(), cols);
-        let mut y = DVector::<f64>::zeros(samples.len());
-        for (k, s) in samples.iter().enumerate() {
+        let mut x = DMatrix::<f64>::zeros(measured.len(), cols);
+        let mut y = DVector::<f64>::zeros(measured.len());
+        for (k, s) in measured.iter().enumerate() {
             for j in 0..l {
                 x[(k, j)] = s.u[j];
             }

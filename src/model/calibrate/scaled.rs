@@ -165,6 +165,7 @@ pub fn calibrate_scaled(
     }
     let with_az: Vec<_> = samples
         .iter()
+        .filter(|s| s.measured)
         .filter_map(|s| s.az.map(|a| (a, s.u)))
         .collect();
     if let Some(v) = fit_vertical(&with_az, &base.vertical) {

@@ -130,8 +130,6 @@ impl VehicleAssembler {
         if self.rates_used || self.outputs_used || (rates.t - outputs.t).abs() > max_skew {
             return None;
         }
-        self.rates_used = true;
-        self.outputs_used = true;
         // The finer clock of the two: a millisecond stamp cannot carry a 2.5 ms period (at
         // 400 Hz ATTITUDE's intervals read 2 and 3 ms), the outputs' microsecond one can.
         let t = if self.rates_ms_clock {
@@ -140,9 +138,10 @@ impl VehicleAssembler {
             rates.t
         };
         if self.last_sample_t.is_some_and(|last| t <= last) {
-            self.counters.out_of_order += 1;
             return None;
         }
+        self.rates_used = true;
+        self.outputs_used = true;
         Some(self.sample(t, rates.v.0, rates.v.1, outputs.v))
     }
 

@@ -65,6 +65,7 @@ impl VehicleAssembler {
                     self.counters.non_finite += 1;
                     return None;
                 }
+                self.rates_ms_clock = false;
                 self.on_rates(*t, *rates, self.attitude)
             }
             Record::Outputs { t, pwm } => {
