@@ -392,9 +392,10 @@ const MIN_OWN_FRACTION: f64 = 0.25;
 /// gain and bias settle, e.g. right after a fault is removed).
 const CLASS_HOLD_S: f64 = 1.0;
 /// The same for a class read from a mixed estimate (see `classify`), a tie-break: a flip of
-/// its sign lasted 1.0-1.3 s (demo tail bias, hexa motor 5 stuck seed 8); on the TradHeli
-/// SITL swash servo 3 gain fault (gain 0.75 about 1000 µs: both gain and offset) the mixed
-/// reading of a loss stayed 30 s, and it must still replace the first reading, an offset.
+/// its sign is a transient of about a second while gain and offset settle, longer than
+/// `CLASS_HOLD_S`; a gain fault about a far operating point (both gain and offset move) reads
+/// mixed for as long as it lasts, and that reading must still replace a first one (figures
+/// in docs/tuning-log.md).
 const MIXED_CLASS_HOLD_S: f64 = 5.0;
 /// Longest a motor's alarm waits for the data before it is decided (`held_for_the_data`): a
 /// filters' misreading at a fault's onset lasts its alarm plus the 2 s of clearing; 3 s
@@ -553,12 +554,10 @@ impl Diagnoser {
     /// the commands that acted, before `update`. The residual's colour learns from it while
     /// nothing is under way, and during a fault the data identify clearly (see
     /// [`Self::identified`]) from the residual with that fault taken out: learned only on the
-    /// stretch before an early fault, the wind's colour is read short (the plane's pitch row,
-    /// 10 s before the elevator's loss at 15 s: lag ratio 0.90, the gusts' 0.98), and the
-    /// fit whitened with it sits low (seed 4: 0.42-0.44 against 0.5; with the loss at 120 s
-    /// instead, seeds 1-10 were within 0.05 on 99.9 % of the steps after onset + 5 s). So
-    /// learning on, the elevator's steps off went from 8.8 to 4.7 % (seeds 1-10) and from
-    /// 3.4 to 1.5 % (seeds 11-40), with the decisions unchanged.
+    /// stretch before an early fault, the wind's colour is read short (10 s of data estimate
+    /// a lag ratio of 0.98 as 0.90), and the fit whitened with it sits low; learning on
+    /// through the fault keeps the estimate of the colour unbiased (figures in
+    /// docs/tuning-log.md).
     pub fn observe(&mut self, t: f64, residual: &[f64; 4], u: &[f64]) {
         if !self.under_way() {
             self.change.push(t, residual, u, true);

@@ -11,6 +11,7 @@
 mod calibrating;
 mod commands;
 mod gate;
+mod holes;
 mod running;
 pub mod step;
 #[cfg(test)]
