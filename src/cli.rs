@@ -93,9 +93,24 @@ pub struct EvalArgs {
     /// Write one SVG per scenario (truth, estimates, bounds) into this directory.
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
-    /// Run each scenario with this many seeds (the scenario's seed, +1, +2, ...).
+    /// Run each scenario with this many seeds (the scenario's seed, +1, +2, ...); with
+    /// --matrix, seeds 1 to this.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
     pub seeds: u64,
+    /// Instead of scenarios: the scenario matrix. Every built-in vehicle x every actuator x
+    /// {loss 0.5, loss 0.75, bias +-0.15, stuck at trim, ramp to gain 0.6 over 8 s} x {steady,
+    /// manoeuvres} x {built-in, rough weather} x seeds, plus healthy flights, each flown
+    /// through the pipeline replay runs (calibration included) and scored against the truth
+    /// and an oracle's detectability (docs/results.md says how).
+    #[arg(long, conflicts_with_all = ["scenarios", "plot"])]
+    pub matrix: bool,
+    /// With --matrix: the fast subset (losses of 0.5 and biases of +0.15, steady flight,
+    /// built-in weather).
+    #[arg(long, requires = "matrix")]
+    pub fast: bool,
+    /// With --matrix: minutes of each healthy flight (one per vehicle, flight, weather and seed).
+    #[arg(long, requires = "matrix", value_name = "MIN", default_value_t = 10.0)]
+    pub healthy_minutes: f64,
     // --decisions / --estimates: of the first seed, one vehicle scenario only.
     #[command(flatten)]
     pub output: OutputArgs,

@@ -1,6 +1,6 @@
 //! `ahcmon eval` and the JSONL files of one vehicle run (`eval --decisions`, `sim`).
 
-use super::{Progress, UsageError, file_input};
+use super::{Progress, UsageError, file_input, in_range};
 use crate::cli::EvalArgs;
 use ahcmon::eval::vehicle::run_vehicle_scenario;
 use ahcmon::eval::{Run, aggregate, run_scenario};
@@ -17,7 +17,20 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         plot,
         seeds,
         output,
+        matrix,
+        fast,
+        healthy_minutes,
     } = a;
+    if matrix {
+        if output.any() {
+            return Err(UsageError(
+                "--decisions / --estimates take one scenario; --matrix flies hundreds".into(),
+            )
+            .into());
+        }
+        let minutes = in_range("--healthy-minutes", healthy_minutes, 0.5, 600.0)?;
+        return super::matrix::run(seeds, minutes * 60.0, fast, json);
+    }
     if output.any() {
         let [one] = scenarios.as_slice() else {
             return Err(

@@ -40,6 +40,7 @@ pub mod eval;
 mod fly;
 mod live;
 pub mod log;
+mod matrix;
 pub mod monitor;
 mod rates;
 pub mod replay;

@@ -3,6 +3,8 @@
 
 pub mod bank;
 pub mod datasets;
+pub mod matrix;
+pub mod oracle;
 pub mod thresholds;
 pub mod vehicle;
 

@@ -4,6 +4,7 @@
 pub mod alerts;
 pub mod dashboard;
 pub mod jsonl;
+pub mod matrix;
 pub mod summary;
 pub mod svg;
 pub mod table;

@@ -1,0 +1,697 @@
+//! `ahcmon eval --matrix`: every built-in vehicle × every actuator × fault kinds × flights ×
+//! weather × seeds, plus long healthy flights, each flown through the pipeline `replay` runs
+//! (the simulator's telemetry as MAVLink messages, the vehicle detected from its heartbeat and
+//! parameters, calibrated on the flight's healthy start), and scored against the simulator's
+//! truth and the oracle's detectability ([`super::oracle`]).
+//!
+//! A fault case flies [`FAULT_FLIGHT_S`] with the fault from [`ONSET_S`] on (sim time; the
+//! vehicle's clock is [`BOOT_OFFSET_S`] ahead): take-off at 0, the 3 s settle and the 20 s
+//! calibration stretch end at 23 s, the diagnosis' 5 s warm-up at 28 s. Pure: no I/O; the
+//! caller runs the cases (in parallel) and prints.
+
+use super::EvalError;
+use super::oracle::{DETECTABLE_LAMBDA, Oracle, OracleNoise};
+use super::vehicle::sim_config;
+use crate::diagnose::vehicle::{Decision, Event};
+use crate::estimate::vehicle::AhcEstimate;
+use crate::monitor::Monitor;
+use crate::output::Sink;
+use crate::pipeline::PipelineConfig;
+use crate::protocol::Frame;
+use crate::scenario::{NamedScenario, Scenario};
+use crate::sim::vehicle::VehicleSim;
+use crate::telemetry::Profile;
+use crate::telemetry::encode::{BOOT_OFFSET_S, SimTelemetry};
+use serde::Serialize;
+
+/// The built-in vehicles the matrix flies.
+pub const VEHICLES: [&str; 5] = ["quad-x", "quad-plus", "hexa-x", "heli-h3-120", "plane"];
+
+/// Fault onset (s of sim time) and the length of a fault flight.
+pub const ONSET_S: f64 = 35.0;
+pub const FAULT_FLIGHT_S: f64 = 55.0;
+/// A fault is to be named within this long of its onset, and judged (class, estimates) this
+/// long after its decision.
+pub const NAME_WITHIN_S: f64 = 5.0;
+pub const JUDGE_AFTER_S: f64 = 5.0;
+/// MIT-UKF gamma and delta within this of the truth count as right.
+pub const ESTIMATE_TOLERANCE: f64 = 0.1;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    Loss050,
+    Loss075,
+    BiasUp,
+    BiasDown,
+    StuckNearTrim,
+    RampTo060,
+}
+
+impl FaultKind {
+    pub const ALL: [FaultKind; 6] = [
+        Self::Loss050,
+        Self::Loss075,
+        Self::BiasUp,
+        Self::BiasDown,
+        Self::StuckNearTrim,
+        Self::RampTo060,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Loss050 => "loss 0.5",
+            Self::Loss075 => "loss 0.75",
+            Self::BiasUp => "bias +0.15",
+            Self::BiasDown => "bias -0.15",
+            Self::StuckNearTrim => "stuck at trim",
+            Self::RampTo060 => "ramp to 0.6/8 s",
+        }
+    }
+
+    /// The classes that are right for this fault when it is judged. A gain ramp is a drift
+    /// while it moves and a loss once it has stopped (8 s after onset): both are right.
+    pub fn right_classes(self) -> &'static [&'static str] {
+        match self {
+            Self::Loss050 | Self::Loss075 => &["loss_of_effectiveness"],
+            Self::BiasUp | Self::BiasDown => &["bias"],
+            Self::StuckNearTrim => &["stuck"],
+            Self::RampTo060 => &["drift", "loss_of_effectiveness"],
+        }
+    }
+
+    /// The fault's TOML lines (`trim`: the actuator's mean command before the onset).
+    fn toml(self, actuator: &str, trim: f64) -> String {
+        let what = match self {
+            Self::Loss050 => "gamma = 0.5".to_string(),
+            Self::Loss075 => "gamma = 0.75".to_string(),
+            Self::BiasUp => "delta = 0.15".to_string(),
+            Self::BiasDown => "delta = -0.15".to_string(),
+            Self::StuckNearTrim => format!("stuck = {trim:.6}"),
+            Self::RampTo060 => "ramp = { duration_s = 8.0, gamma = 0.6 }".to_string(),
+        };
+        format!("\n[[fault]]\nactuator = \"{actuator}\"\nt = {ONSET_S:.1}\n{what}\n")
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Flight {
+    /// Hover or cruise with the built-in attitude dither.
+    Steady,
+    /// The dither and a roll, a pitch and a yaw manoeuvre every 12 s.
+    Manoeuvres,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Weather {
+    /// The built-in scenarios' gusts and 10 % damping mismatch.
+    Builtin,
+    /// 1.5 times the gusts, damping 15 % over and effectiveness 15 % under the profile.
+    Rough,
+}
+
+/// One flight of the matrix.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Case {
+    pub vehicle: &'static str,
+    /// The faulty actuator and the fault; `None` for a healthy flight.
+    pub fault: Option<(String, FaultKind)>,
+    pub flight: Flight,
+    pub weather: Weather,
+    pub seed: u64,
+    pub duration_s: f64,
+}
+
+/// Which cases: all, or the fast subset CI runs (one seed, losses of 0.5 and biases of +0.15
+/// in steady flight with the built-in weather, two healthy minutes per vehicle).
+#[derive(Debug, Clone, Copy)]
+pub struct MatrixSpec {
+    pub seeds: u64,
+    pub healthy_s: f64,
+    pub fast: bool,
+}
+
+/// The cases of `spec`, in a fixed order. Seeds run from 1.
+pub fn cases(spec: &MatrixSpec) -> Result<Vec<Case>, EvalError> {
+    let (kinds, flights, weathers): (&[FaultKind], &[Flight], &[Weather]) = if spec.fast {
+        (
+            &[FaultKind::Loss050, FaultKind::BiasUp],
+            &[Flight::Steady],
+            &[Weather::Builtin],
+        )
+    } else {
+        (
+            &FaultKind::ALL,
+            &[Flight::Steady, Flight::Manoeuvres],
+            &[Weather::Builtin, Weather::Rough],
+        )
+    };
+    let mut out = vec![];
+    for vehicle in VEHICLES {
+        let profile = Profile::resolve(vehicle)
+            .map_err(|e| EvalError::Sim(vehicle.to_string(), e.to_string()))?;
+        for seed in 1..=spec.seeds {
+            for &flight in flights {
+                for &weather in weathers {
+                    let case = |fault, duration_s| Case {
+                        vehicle,
+                        fault,
+                        flight,
+                        weather,
+                        seed,
+                        duration_s,
+                    };
+                    for name in profile.actuator_names() {
+                        for &kind in kinds {
+                            out.push(case(Some((name.clone(), kind)), FAULT_FLIGHT_S));
+                        }
+                    }
+                    out.push(case(None, spec.healthy_s));
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+impl Case {
+    pub fn label(&self) -> String {
+        let fault = match &self.fault {
+            Some((a, k)) => format!("{a} {}", k.as_str()),
+            None => "healthy".into(),
+        };
+        format!(
+            "{} {fault}, {:?}, {:?} weather, seed {}",
+            self.vehicle, self.flight, self.weather, self.seed
+        )
+        .to_lowercase()
+    }
+
+    /// The case as a scenario file's text, with the fault's trim given (`ahcmon sim` flies it
+    /// again). Every case starts from the built-in scenarios' weather and dither.
+    pub fn scenario_toml(&self, trim: f64) -> String {
+        let (gust, mismatch) = match self.weather {
+            Weather::Builtin => (1.0, "{ damping = 1.1 }"),
+            Weather::Rough => (1.5, "{ damping = 1.15, effectiveness = 0.85 }"),
+        };
+        let mut s = format!(
+            "description = \"matrix: {}\"\nvehicle = \"{}\"\nduration_s = {:.1}\nrate_hz = 50.0\nseed = {}\nmodel_mismatch = {mismatch}\ngusts = {{ angular = [{:.3}, {:.3}, {:.3}], vertical = {:.3}, tau_s = 1.0 }}\n\n[attitude_dither]\namplitude = [0.05, 0.05, 0.1]\nfreqs_hz = [0.3, 0.7, 1.1]\n",
+            self.label(),
+            self.vehicle,
+            self.duration_s,
+            self.seed,
+            0.5 * gust,
+            0.5 * gust,
+            0.15 * gust,
+            0.3 * gust,
+        );
+        if self.flight == Flight::Manoeuvres {
+            let mut t = 2.0;
+            let mut sign = 1.0;
+            while t < self.duration_s {
+                s += &format!(
+                    "\n[[manoeuvre]]\nt = {t:.1}\nduration_s = 2.0\nroll_deg = {:.1}\n\n[[manoeuvre]]\nt = {:.1}\nduration_s = 2.0\npitch_deg = {:.1}\n\n[[manoeuvre]]\nt = {:.1}\nduration_s = 2.0\nyaw_rate_dps = {:.1}\n",
+                    15.0 * sign,
+                    t + 4.0,
+                    -10.0 * sign,
+                    t + 7.0,
+                    30.0 * sign
+                );
+                t += 12.0;
+                sign = -sign;
+            }
+        }
+        if let Some((actuator, kind)) = &self.fault {
+            s += &kind.toml(actuator, trim);
+        }
+        s
+    }
+
+    fn named(&self, trim: f64) -> Result<NamedScenario, EvalError> {
+        let text = self.scenario_toml(trim);
+        let scenario = Scenario::from_toml(&text, "matrix case")
+            .map_err(|e| EvalError::Sim(self.label(), e.to_string()))?;
+        Ok(NamedScenario {
+            name: self.label(),
+            scenario,
+        })
+    }
+}
+
+/// How one case went.
+#[derive(Debug, Clone, Serialize)]
+pub struct CaseResult {
+    pub case: Case,
+    /// The oracle's non-centrality 5 s after the onset, and whether that makes the fault
+    /// detectable ([`DETECTABLE_LAMBDA`]).
+    pub oracle_lambda: Option<f64>,
+    pub detectable: Option<bool>,
+    /// Fault decisions before the onset (any actuator; all of a healthy flight's).
+    pub false_before_onset: u32,
+    /// After the onset: the first fault decision's actuator and delay (s).
+    pub first: Option<(String, f64)>,
+    /// Delay of the first fault decision on the faulty actuator (s).
+    pub named_after_s: Option<f64>,
+    /// Fault decisions on other actuators after the onset.
+    pub wrong_actuator: u32,
+    /// The class in force on the faulty actuator `JUDGE_AFTER_S` after its decision.
+    pub class: Option<String>,
+    pub class_right: Option<bool>,
+    /// MIT-UKF gamma and delta minus the truth `JUDGE_AFTER_S` after the decision.
+    pub gamma_error: Option<f64>,
+    pub delta_error: Option<f64>,
+    /// The vehicle got a `cannot_estimate` decision.
+    pub cannot_estimate: bool,
+    /// Estimating time (h) of the flight.
+    pub estimating_h: f64,
+}
+
+/// What a case's run keeps: the decisions and the faulty actuator's MIT-UKF estimates.
+struct Collect {
+    target: Option<usize>,
+    decisions: Vec<Decision>,
+    estimates: Vec<(f64, AhcEstimate)>,
+    first_estimate: Option<f64>,
+    last_estimate: f64,
+}
+
+impl Sink for Collect {
+    fn decision(&mut self, d: &Decision) {
+        self.decisions.push(d.clone());
+    }
+
+    fn estimates(&mut self, t: f64, _sysid: u8, est: &[&[AhcEstimate]; 2], _p: &Profile) {
+        self.first_estimate.get_or_insert(t);
+        self.last_estimate = t;
+        if let Some(e) = self.target.and_then(|j| est[0].get(j)) {
+            self.estimates.push((t, *e));
+        }
+    }
+}
+
+/// The mean command of actuator `j` over the 2 s before the onset, from the healthy flight
+/// (the fault changes nothing before it).
+fn trim_before_onset(healthy: &NamedScenario, seed: u64, j: usize) -> Result<f64, EvalError> {
+    let err = |e: String| EvalError::Sim(healthy.name.clone(), e);
+    let (cfg, _) = sim_config(healthy, seed)?;
+    let mut sim = VehicleSim::new(cfg).map_err(err)?;
+    let (mut sum, mut n) = (0.0, 0u32);
+    while sim.time() < ONSET_S {
+        let t = sim.time();
+        let s = sim.step();
+        if t >= ONSET_S - 2.0 {
+            sum += s.u[j];
+            n += 1;
+        }
+    }
+    Ok(sum / f64::from(n.max(1)))
+}
+
+/// Fly one case through the pipeline and score it.
+pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
+    let vehicle =
+        Profile::resolve(case.vehicle).map_err(|e| EvalError::Sim(case.label(), e.to_string()))?;
+    let target = case
+        .fault
+        .as_ref()
+        .and_then(|(a, _)| vehicle.actuator_index(a));
+    let trim = match (&case.fault, target) {
+        (Some((_, FaultKind::StuckNearTrim)), Some(j)) => {
+            let healthy = Case {
+                fault: None,
+                ..case.clone()
+            };
+            trim_before_onset(&healthy.named(0.0)?, case.seed, j)?
+        }
+        _ => 0.0,
+    };
+    let named = case.named(trim)?;
+    let err = |e: String| EvalError::Sim(case.label(), e);
+    let (cfg, _) = sim_config(&named, case.seed)?;
+    let truth = cfg
+        .profile
+        .rate_params()
+        .scaled(cfg.mismatch.damping, cfg.mismatch.effectiveness);
+    let gusts = cfg.gusts.clone().unwrap_or(crate::sim::vehicle::Gusts {
+        angular: [0.0; 3],
+        vertical: 0.0,
+        tau_s: 1.0,
+    });
+    let mut oracle = Oracle::new(
+        truth,
+        OracleNoise {
+            dt: cfg.dt,
+            gust_tau_s: gusts.tau_s,
+            gust_sd: [
+                gusts.angular[0],
+                gusts.angular[1],
+                gusts.angular[2],
+                gusts.vertical,
+            ],
+            gyro_sd: cfg.gyro_noise,
+            az_sd: vehicle.model.measure_az.then_some(cfg.az_noise),
+        },
+    );
+    let l = vehicle.actuators.len();
+    let mut sim = VehicleSim::new(cfg).map_err(err)?;
+    let mut enc = SimTelemetry::new(&vehicle);
+    let mut monitor = Monitor::new(PipelineConfig::default());
+    let mut sink = Collect {
+        target,
+        decisions: vec![],
+        estimates: vec![],
+        first_estimate: None,
+        last_estimate: 0.0,
+    };
+    let mut msgs = Vec::with_capacity(16);
+    let mut seq = 0u8;
+    let mut lambda_at_mark = None;
+    let mut deviation = [0.0; crate::model::MAX_ACTUATORS];
+    let mut prev = sim.step();
+    let mut truth_at: Vec<(f64, f64, f64)> = vec![];
+    for _ in 1..named.scenario.steps() {
+        let next = sim.step();
+        for (j, dev) in deviation.iter_mut().enumerate().take(l) {
+            *dev = (prev.gamma[j] - 1.0) * prev.u[j] + prev.delta[j];
+        }
+        oracle.step(&deviation[..l]);
+        if lambda_at_mark.is_none() && prev.t >= ONSET_S + NAME_WITHIN_S {
+            lambda_at_mark = Some(oracle.lambda());
+        }
+        if let Some(j) = target {
+            truth_at.push((prev.t + BOOT_OFFSET_S, prev.gamma[j], prev.delta[j]));
+        }
+        msgs.clear();
+        let az = if vehicle.model.measure_az {
+            prev.y[3]
+        } else {
+            -9.80665
+        };
+        let rates = [prev.y[0], prev.y[1], prev.y[2]];
+        enc.messages(prev.t, rates, prev.attitude, az, &next.u[..l], &mut msgs);
+        for m in msgs.drain(..) {
+            let frame = Frame {
+                version: mavlink_core::MavlinkVersion::V2,
+                sysid: 1,
+                compid: 1,
+                seq,
+                msg_id: mavlink_core::Message::message_id(&m),
+                msg: m,
+            };
+            seq = seq.wrapping_add(1);
+            monitor.on_frame(&frame, &mut sink);
+        }
+        prev = next;
+    }
+    monitor.finish(&mut sink);
+    Ok(score(
+        case,
+        target.is_some(),
+        lambda_at_mark,
+        &sink,
+        &truth_at,
+    ))
+}
+
+fn score(
+    case: &Case,
+    faulty: bool,
+    lambda: Option<f64>,
+    sink: &Collect,
+    truth_at: &[(f64, f64, f64)],
+) -> CaseResult {
+    let onset = ONSET_S + BOOT_OFFSET_S;
+    let target = case.fault.as_ref().map(|(a, _)| a.as_str());
+    let faults: Vec<&Decision> = (sink.decisions.iter())
+        .filter(|d| d.event == Event::Fault)
+        .collect();
+    let before = |d: &&&Decision| !faulty || d.t < onset;
+    let false_before_onset = faults.iter().filter(before).count() as u32;
+    let after: Vec<&Decision> = if faulty {
+        faults.iter().copied().filter(|d| d.t >= onset).collect()
+    } else {
+        vec![]
+    };
+    let first = after
+        .first()
+        .map(|d| (d.actuator.clone().unwrap_or_default(), d.t - onset));
+    let on_target = after.iter().find(|d| d.actuator.as_deref() == target);
+    let wrong_actuator = after
+        .iter()
+        .filter(|d| d.actuator.as_deref() != target)
+        .count() as u32;
+    let mut class = None;
+    let (mut gamma_error, mut delta_error) = (None, None);
+    if let Some(d) = on_target {
+        let at = d.t + JUDGE_AFTER_S;
+        for e in &sink.decisions {
+            if e.t > at || e.actuator.as_deref() != target {
+                continue;
+            }
+            match e.event {
+                Event::Fault | Event::Changed if e.t >= d.t => class = e.class,
+                Event::Cleared if e.t >= d.t => class = None,
+                _ => {}
+            }
+        }
+        let est = sink.estimates.iter().find(|(t, _)| *t >= at);
+        let tru = truth_at.iter().find(|(t, _, _)| *t >= at - 1e-9);
+        if let (Some((_, e)), Some((_, g, dl))) = (est, tru) {
+            gamma_error = Some(e.gamma - g);
+            delta_error = Some(e.delta - dl);
+        }
+    }
+    let class = class.map(|c| c.as_str().to_string());
+    let class_right = match (&case.fault, on_target) {
+        (Some((_, kind)), Some(_)) => Some(
+            class
+                .as_deref()
+                .is_some_and(|c| kind.right_classes().contains(&c)),
+        ),
+        _ => None,
+    };
+    let estimating_h = sink
+        .first_estimate
+        .map_or(0.0, |t0| (sink.last_estimate - t0) / 3600.0);
+    CaseResult {
+        case: case.clone(),
+        oracle_lambda: lambda.filter(|_| faulty),
+        detectable: lambda.filter(|_| faulty).map(|l| l >= DETECTABLE_LAMBDA),
+        false_before_onset,
+        first,
+        named_after_s: on_target.map(|d| d.t - onset),
+        wrong_actuator,
+        class,
+        class_right,
+        gamma_error,
+        delta_error,
+        cannot_estimate: (sink.decisions.iter()).any(|d| d.event == Event::CannotEstimate),
+        estimating_h,
+    }
+}
+
+/// One row of the report: a vehicle and fault kind (or all), or a vehicle's healthy flights.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct ReportRow {
+    pub vehicle: String,
+    pub kind: String,
+    pub cases: usize,
+    pub detectable: usize,
+    /// Detectable cases whose first decision after the onset names the faulty actuator within
+    /// `NAME_WITHIN_S`.
+    pub named_right: usize,
+    pub delay_p50_s: Option<f64>,
+    pub delay_p90_s: Option<f64>,
+    /// Of the named-right cases: the class right, and gamma and delta both within 0.1.
+    pub class_right: usize,
+    pub estimate_right: usize,
+    /// Not-detectable cases with a fault decision on another actuator.
+    pub undetectable_wrong: usize,
+    /// Fault decisions before the onsets of fault flights.
+    pub false_before_onset: u32,
+    /// Fault decisions in healthy flights, and those flights' estimating hours.
+    pub false_healthy: u32,
+    pub healthy_h: f64,
+    pub cannot_estimate: usize,
+}
+
+fn percentile(v: &mut [f64], p: f64) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let i = ((v.len() - 1) as f64 * p).round() as usize;
+    Some(v[i])
+}
+
+/// The rows over `results`: per vehicle and kind, per vehicle, per kind and overall.
+pub fn report(results: &[CaseResult]) -> Vec<ReportRow> {
+    let mut keys: Vec<(String, String)> = vec![];
+    let kind_of = |r: &CaseResult| {
+        r.case
+            .fault
+            .as_ref()
+            .map_or("healthy".to_string(), |(_, k)| k.as_str().to_string())
+    };
+    for r in results {
+        for k in [
+            (r.case.vehicle.to_string(), kind_of(r)),
+            (r.case.vehicle.to_string(), "all".into()),
+            ("all".into(), kind_of(r)),
+            ("all".into(), "all".into()),
+        ] {
+            if !keys.contains(&k) {
+                keys.push(k);
+            }
+        }
+    }
+    keys.sort_by_key(|(v, k)| (v == "all", v.clone(), k == "all", k == "healthy", k.clone()));
+    keys.iter()
+        .map(|(v, k)| {
+            let rows: Vec<&CaseResult> = (results.iter())
+                .filter(|r| (v == "all" || r.case.vehicle == v) && (k == "all" || kind_of(r) == *k))
+                .collect();
+            row(v, k, &rows)
+        })
+        .collect()
+}
+
+fn row(vehicle: &str, kind: &str, rows: &[&CaseResult]) -> ReportRow {
+    let mut out = ReportRow {
+        vehicle: vehicle.into(),
+        kind: kind.into(),
+        cases: rows.len(),
+        ..Default::default()
+    };
+    let mut delays = vec![];
+    for r in rows {
+        out.cannot_estimate += usize::from(r.cannot_estimate);
+        if r.case.fault.is_none() {
+            out.false_healthy += r.false_before_onset;
+            out.healthy_h += r.estimating_h;
+            continue;
+        }
+        out.false_before_onset += r.false_before_onset;
+        let target = r.case.fault.as_ref().map(|(a, _)| a.as_str());
+        if r.detectable != Some(true) {
+            out.undetectable_wrong += usize::from(r.wrong_actuator > 0);
+            continue;
+        }
+        out.detectable += 1;
+        let right = r
+            .first
+            .as_ref()
+            .is_some_and(|(a, t)| Some(a.as_str()) == target && *t <= NAME_WITHIN_S);
+        if !right {
+            continue;
+        }
+        out.named_right += 1;
+        delays.extend(r.named_after_s);
+        out.class_right += usize::from(r.class_right == Some(true));
+        let within = |e: Option<f64>| e.is_some_and(|e| e.abs() <= ESTIMATE_TOLERANCE);
+        out.estimate_right += usize::from(within(r.gamma_error) && within(r.delta_error));
+    }
+    out.delay_p50_s = percentile(&mut delays, 0.5);
+    out.delay_p90_s = percentile(&mut delays, 0.9);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decision(t: f64, event: Event, actuator: &str, class: Option<&str>) -> Decision {
+        let mut d = Decision::monitor(t, 1, event, "");
+        d.actuator = Some(actuator.into());
+        d.class = class.map(|c| match c {
+            "bias" => crate::diagnose::vehicle::FaultClass::Bias,
+            _ => crate::diagnose::vehicle::FaultClass::LossOfEffectiveness,
+        });
+        d
+    }
+
+    fn collect(decisions: Vec<Decision>) -> Collect {
+        Collect {
+            target: Some(1),
+            decisions,
+            estimates: vec![(
+                60.0,
+                AhcEstimate {
+                    gamma: 0.55,
+                    delta: 0.02,
+                    ..Default::default()
+                },
+            )],
+            first_estimate: Some(33.0),
+            last_estimate: 65.0,
+        }
+    }
+
+    /// The scoring on hand-made decisions: delays from the onset on the vehicle's clock, the
+    /// class in force 5 s after the decision, a wrong actuator counted, one before the onset
+    /// false.
+    #[test]
+    fn scoring_of_a_hand_made_run() {
+        let case = Case {
+            vehicle: "quad-x",
+            fault: Some(("motor2".into(), FaultKind::Loss050)),
+            flight: Flight::Steady,
+            weather: Weather::Builtin,
+            seed: 1,
+            duration_s: FAULT_FLIGHT_S,
+        };
+        let onset = ONSET_S + BOOT_OFFSET_S;
+        let sink = collect(vec![
+            decision(onset - 3.0, Event::Fault, "motor1", Some("bias")),
+            decision(onset + 0.5, Event::Fault, "motor2", Some("bias")),
+            decision(onset + 1.5, Event::Changed, "motor2", Some("loss")),
+            decision(onset + 2.0, Event::Fault, "motor3", Some("bias")),
+            decision(onset + 7.0, Event::Changed, "motor2", Some("bias")),
+        ]);
+        let truth = [(onset + 5.5, 0.5, 0.0)];
+        let r = score(&case, true, Some(100.0), &sink, &truth);
+        assert_eq!(r.false_before_onset, 1);
+        assert_eq!(r.first, Some(("motor2".into(), 0.5)));
+        assert_eq!(r.named_after_s, Some(0.5));
+        assert_eq!(r.wrong_actuator, 1);
+        assert_eq!(r.class.as_deref(), Some("loss_of_effectiveness"));
+        assert_eq!(r.class_right, Some(true));
+        assert!((r.gamma_error.unwrap() - 0.05).abs() < 1e-12);
+        assert_eq!(r.detectable, Some(true));
+        let rows = report(std::slice::from_ref(&r));
+        let all = rows.iter().find(|x| x.vehicle == "all" && x.kind == "all");
+        let all = all.unwrap();
+        assert_eq!(
+            (all.detectable, all.named_right, all.class_right),
+            (1, 1, 1)
+        );
+        assert_eq!(all.estimate_right, 1);
+        // Below the oracle's level the same run counts as an undetectable wrong decision.
+        let r = score(&case, true, Some(DETECTABLE_LAMBDA * 0.9), &sink, &truth);
+        let rows = report(&[r]);
+        let all = rows.iter().find(|x| x.vehicle == "all" && x.kind == "all");
+        assert_eq!(
+            all.map(|x| (x.detectable, x.undetectable_wrong)),
+            Some((0, 1))
+        );
+    }
+
+    #[test]
+    fn the_fast_subset_and_the_whole_matrix() {
+        let spec = |fast| MatrixSpec {
+            seeds: 2,
+            healthy_s: 60.0,
+            fast,
+        };
+        let all = cases(&spec(false)).unwrap();
+        // 21 actuators × 6 kinds + 5 healthy, × 2 flights × 2 weathers × 2 seeds.
+        assert_eq!(all.len(), (21 * 6 + 5) * 2 * 2 * 2);
+        let fast = cases(&spec(true)).unwrap();
+        assert_eq!(fast.len(), (21 * 2 + 5) * 2);
+        for c in &all {
+            c.named(0.3).unwrap();
+        }
+    }
+}

@@ -1,0 +1,68 @@
+//! The scenario matrix's report as a table (`ahcmon eval --matrix`).
+
+use crate::eval::matrix::ReportRow;
+use std::fmt::Write;
+
+fn pct(k: usize, n: usize) -> String {
+    if n == 0 {
+        "-".into()
+    } else {
+        format!("{:.0}", 100.0 * k as f64 / n as f64)
+    }
+}
+
+fn secs(v: Option<f64>) -> String {
+    v.map_or("-".into(), |v| format!("{v:.2}"))
+}
+
+/// One line per row: detection among the oracle-detectable cases (named right within 5 s),
+/// its delays, class and estimates of those named right, wrong-actuator decisions on cases the
+/// oracle cannot detect, false decisions before the onsets and in healthy flights (and per
+/// healthy hour).
+pub fn render(rows: &[ReportRow]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+        "vehicle",
+        "fault",
+        "cases",
+        "detec",
+        "named%",
+        "p50_s",
+        "p90_s",
+        "class%",
+        "est%",
+        "undet_w",
+        "pre_on",
+        "healthy",
+        "false/h",
+        "c_est"
+    );
+    for r in rows {
+        let per_h = if r.healthy_h > 0.0 {
+            format!("{:.1}", f64::from(r.false_healthy) / r.healthy_h)
+        } else {
+            "-".into()
+        };
+        let _ = writeln!(
+            s,
+            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+            r.vehicle,
+            r.kind,
+            r.cases,
+            r.detectable,
+            pct(r.named_right, r.detectable),
+            secs(r.delay_p50_s),
+            secs(r.delay_p90_s),
+            pct(r.class_right, r.named_right),
+            pct(r.estimate_right, r.named_right),
+            r.undetectable_wrong,
+            r.false_before_onset,
+            r.false_healthy,
+            per_h,
+            r.cannot_estimate
+        );
+    }
+    s
+}
