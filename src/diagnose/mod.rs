@@ -5,6 +5,8 @@
 //! conclusion): a step whose data no state in its set can explain is a fault at once.
 
 pub mod change;
+pub mod decision;
+pub mod isolate;
 pub mod vehicle;
 
 /// A time to the microsecond: stamps in milliseconds times 1e-3, and sums of steps, carry float

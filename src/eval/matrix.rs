@@ -69,14 +69,20 @@ impl FaultKind {
         }
     }
 
-    /// The classes that are right for this fault when it is judged. A gain ramp is a drift
-    /// while it moves and a loss once it has stopped (8 s after onset): both are right.
-    pub fn right_classes(self) -> &'static [&'static str] {
-        match self {
-            Self::Loss050 | Self::Loss075 => &["loss_of_effectiveness"],
-            Self::BiasUp | Self::BiasDown => &["bias"],
-            Self::StuckNearTrim => &["stuck"],
-            Self::RampTo060 => &["drift", "loss_of_effectiveness"],
+    /// Whether `class` is right for this fault when its truth is `(gamma, delta)` at the
+    /// judging time: the class definitions applied to the truth (`docs/diagnosis.md`), so a
+    /// surface stuck at a trim near 0 (gain 0, no offset) is stuck or a loss, a gain ramp a
+    /// drift while it moves and a loss either way.
+    pub fn right_class(self, class: &str, gamma: f64, delta: f64) -> bool {
+        let p = crate::diagnose::vehicle::DiagnosisParams::default();
+        let loss = gamma < 1.0 - p.loe_tau && delta.abs() <= p.bias_tau;
+        let bias = delta.abs() > p.bias_tau && (gamma - 1.0).abs() <= p.loe_tau;
+        match class {
+            "loss_of_effectiveness" => loss,
+            "bias" => bias,
+            "stuck" => self == Self::StuckNearTrim,
+            "drift" => self == Self::RampTo060,
+            _ => false,
         }
     }
 
@@ -248,8 +254,10 @@ pub struct CaseResult {
     /// detectable ([`DETECTABLE_LAMBDA`]).
     pub oracle_lambda: Option<f64>,
     pub detectable: Option<bool>,
-    /// Fault decisions before the onset (any actuator; all of a healthy flight's).
+    /// Fault decisions before the onset (any actuator; all of a healthy flight's), and each
+    /// one's actuator and rule.
     pub false_before_onset: u32,
+    pub false_decisions: Vec<(String, String)>,
     /// After the onset: the first fault decision's actuator and delay (s).
     pub first: Option<(String, f64)>,
     /// Delay of the first fault decision on the faulty actuator (s).
@@ -429,6 +437,12 @@ fn score(
         .collect();
     let before = |d: &&&Decision| !faulty || d.t < onset;
     let false_before_onset = faults.iter().filter(before).count() as u32;
+    let false_decisions = (faults.iter().filter(before))
+        .map(|d| {
+            let rule = d.rule.map_or(String::new(), |r| format!("{r:?}"));
+            (d.actuator.clone().unwrap_or_default(), rule)
+        })
+        .collect();
     let after: Vec<&Decision> = if faulty {
         faults.iter().copied().filter(|d| d.t >= onset).collect()
     } else {
@@ -464,12 +478,14 @@ fn score(
         }
     }
     let class = class.map(|c| c.as_str().to_string());
-    let class_right = match (&case.fault, on_target) {
-        (Some((_, kind)), Some(_)) => Some(
-            class
-                .as_deref()
-                .is_some_and(|c| kind.right_classes().contains(&c)),
-        ),
+    let judged = on_target.and_then(|d| {
+        let at = d.t + JUDGE_AFTER_S;
+        truth_at.iter().find(|(t, _, _)| *t >= at - 1e-9)
+    });
+    let class_right = match (&case.fault, judged) {
+        (Some((_, kind)), Some(&(_, g, dl))) => {
+            Some(class.as_deref().is_some_and(|c| kind.right_class(c, g, dl)))
+        }
         _ => None,
     };
     let estimating_h = sink
@@ -480,6 +496,7 @@ fn score(
         oracle_lambda: lambda.filter(|_| faulty),
         detectable: lambda.filter(|_| faulty).map(|l| l >= DETECTABLE_LAMBDA),
         false_before_onset,
+        false_decisions,
         first,
         named_after_s: on_target.map(|d| d.t - onset),
         wrong_actuator,

@@ -12,8 +12,8 @@ use crate::sim::vehicle::{ModelMismatch, VehicleSim, VehicleSimConfig};
 use crate::telemetry::Profile;
 use std::time::Instant;
 
-/// Isolation must happen within this long after onset.
-const ISOLATE_WITHIN_S: f64 = 2.0;
+/// Isolation must happen within this long after onset (the matrix's `NAME_WITHIN_S`).
+const ISOLATE_WITHIN_S: f64 = 5.0;
 /// The class is judged on the decision in force this long after onset.
 const CLASS_AT_S: f64 = 5.0;
 /// The MIT-UKF's gamma should be within the tolerance of the truth from this long after onset.

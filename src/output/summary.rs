@@ -205,6 +205,9 @@ pub fn render(
                         || format!("healthy since the reboot ({} before)", c.as_str()),
                     )
                 }
+                (None, None, _) if p.suspect[j] => {
+                    "suspect (evidence short of a fault: see its decision)".into()
+                }
                 (None, None, _) => cleared_with(None).unwrap_or_else(|| "healthy".into()),
             };
             for (f, name) in FILTER_NAMES.iter().enumerate() {

@@ -130,6 +130,8 @@ pub struct VehiclePipeline {
     seen_grounded: bool,
     /// Actuators with a fault in force, by index.
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
+    /// Actuators the diagnosis holds suspect (rules S1, S2).
+    pub suspect: [bool; MAX_ACTUATORS],
     /// Said once that an output channel carries no PWM.
     warned_missing_output: bool,
     /// The last calibration stretch's data could not support an estimate (`cannot_estimate`,
@@ -172,6 +174,7 @@ impl VehiclePipeline {
             last_sample_t: None,
             seen_grounded: false,
             active: [None; MAX_ACTUATORS],
+            suspect: [false; MAX_ACTUATORS],
             warned_missing_output: false,
             unsupported: false,
             announced_takeoff: None,
@@ -409,6 +412,7 @@ impl VehiclePipeline {
         self.airborne_since = None;
         self.announced_takeoff = None;
         self.active = [None; MAX_ACTUATORS];
+        self.suspect = [false; MAX_ACTUATORS];
         // The new boot's take-off is watched or not afresh.
         self.seen_grounded = false;
         self.warned.remove(gate::JOINED_WARNING);

@@ -198,6 +198,7 @@ impl VehiclePipeline {
         r.core.step(&step, &mut self.counters, sink);
         for j in 0..r.l {
             self.active[j] = r.core.diag.active(j);
+            self.suspect[j] = r.core.diag.health(j) == crate::diagnose::vehicle::Health::Suspect;
         }
         self.last = Some((s.t, r.core.est));
         if let Some(b) = &mut self.before_reboot {

@@ -138,7 +138,8 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
             (sev, fit(&what, &by))
         }
         Event::Cleared => (MavSeverity::MAV_SEVERITY_NOTICE, fit("cleared", "")),
-        Event::ExcitationLow => return None,
+        // Statements, not faults: the dashboard, summary and decisions carry them.
+        Event::ExcitationLow | Event::Suspect | Event::SuspectCleared => return None,
         Event::FilterReset => (MavSeverity::MAV_SEVERITY_WARNING, "AHC filter reset".into()),
         Event::CannotEstimate => (
             MavSeverity::MAV_SEVERITY_WARNING,

@@ -166,7 +166,10 @@ pub(super) fn actuator_table(
             .iter()
             .rev()
             .find(|d| Some(d.sysid) == sysid && d.actuator.as_deref() == Some(a.name.as_str()));
-        if p.active[j].is_none() && last.is_some_and(|d| d.event == Event::ExcitationLow) {
+        if p.active[j].is_none() && p.suspect[j] {
+            state = "suspect".into();
+            style = Style::default().fg(Color::Yellow);
+        } else if p.active[j].is_none() && last.is_some_and(|d| d.event == Event::ExcitationLow) {
             state = "excitation low".into();
             style = Style::default().fg(Color::Yellow);
         }
@@ -317,21 +320,24 @@ pub(super) fn chart(
 pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], sysid: Option<u8>) {
     let n = area.height.saturating_sub(2) as usize;
     let width = area.width.saturating_sub(2) as usize;
-    // `excitation_low` only as the newest: the table's state column says it per actuator, and
-    // a steady end of flight filled the panel with them, pushing the fault out of sight.
+    // Statements (`excitation_low`, `suspect`) only as the newest: the table's state column
+    // says them per actuator, and a steady end of flight filled the panel with them, pushing
+    // the fault out of sight.
     let shown: Vec<(Style, Vec<String>)> = decisions
         .iter()
         .rev()
         .filter(|d| sysid.is_none_or(|s| d.sysid == s))
         .enumerate()
-        .filter(|(k, d)| *k == 0 || d.event != Event::ExcitationLow)
+        .filter(|(k, d)| *k == 0 || !d.event.is_statement())
         .map(|(_, d)| d)
         .take(n)
         .map(|d| {
             let style = match d.event {
                 Event::Fault | Event::Changed => Style::default().fg(Color::Red),
-                Event::Cleared | Event::LinkRestored => Style::default().fg(Color::Green),
-                Event::LinkLost | Event::FilterReset | Event::CannotEstimate => {
+                Event::Cleared | Event::LinkRestored | Event::SuspectCleared => {
+                    Style::default().fg(Color::Green)
+                }
+                Event::LinkLost | Event::FilterReset | Event::CannotEstimate | Event::Suspect => {
                     Style::default().fg(Color::Yellow)
                 }
                 Event::ExcitationLow => Style::default().fg(Color::DarkGray),

@@ -1,0 +1,252 @@
+//! The class of a fault (rules C1-C3), the data's alarm (D2) and the identification the
+//! filters follow: the parts of the diagnosis that read the change test's fit and the MIT-UKF's
+//! estimate (`docs/diagnosis.md`).
+
+use super::*;
+
+impl Diagnoser {
+    /// A motor's or throttle's gain-or-offset comparison on the whitened residual, for the
+    /// reading's actuator.
+    pub(super) fn whitened_kind(&self, j: usize) -> Option<KindFit> {
+        self.whitened
+            .filter(|_| self.reading.is_some_and(|r| r.actuator == j))
+    }
+    /// A reading's change is as large as the thresholds call a fault: a gain by the gain
+    /// statistic's measure (`(1 - γ) gain_ref` against `gain_threshold`; none without one), an
+    /// offset or a stuck output's distance from the mean command against `threshold`: the
+    /// sizes the filters' statistics must reach, set on healthy flights.
+    pub(super) fn beyond_thresholds(&self, r: &Reading) -> bool {
+        let p = &self.params;
+        let (gain_min, size_min) = (p.gain_threshold / p.gain_ref, p.threshold);
+        match r.kind {
+            ChangeKind::Gain => (1.0 - r.value).abs() >= gain_min,
+            ChangeKind::Offset => r.value.abs() >= size_min,
+            ChangeKind::Stuck => (r.value - r.command_mean).abs() >= size_min,
+        }
+    }
+    /// D2: the actuator the data alarm on: named clearly by the whitened search (its margin is
+    /// honest about the wind's colour; the plain search's counts it only through the lag-one
+    /// autocorrelation, and in 1.5 times the gusts read healthy surfaces clearly changed), on a
+    /// change of at least `CLASS_MIN_S` that began with a second of the store before it, as
+    /// large as the thresholds call a fault.
+    pub(super) fn data_alarm(&self) -> Option<usize> {
+        let r = self.naming_reading()?;
+        let before = (1.0 / self.dt).round() as usize;
+        let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
+        (self.reading_whitened
+            && long
+            && r.samples + before <= self.change.len()
+            && self.beyond_thresholds(&r))
+        .then_some(r.actuator)
+    }
+    /// C1: the class the data give actuator `j`: the reading is its, the stretch at least
+    /// `CLASS_MIN_S`, one kind beats the others by `DATA_MARGIN` and the pair of gain and
+    /// offset is not significantly better (`PAIR_INSIGNIFICANT`); a motor's or throttle's gain
+    /// against offset on the whitened residual.
+    pub(super) fn data_class(&self, j: usize) -> Option<FaultClass> {
+        let r = self.reading.filter(|r| r.actuator == j)?;
+        let p = &self.params;
+        if r.samples as f64 * self.dt < CLASS_MIN_S {
+            return None;
+        }
+        if self.is_angle[j] {
+            let span = r.ramp_samples as f64 * self.dt;
+            if span >= CLASS_MIN_S
+                && (r.ramp_rate * span).abs() > p.bias_tau
+                && r.ramp_drop >= r.mixed_drop
+                && -r.margin_over(r.ramp_drop) >= DATA_MARGIN
+            {
+                return Some(FaultClass::Drift);
+            }
+        }
+        let (kind, value, margin, mixed) = match self.whitened_kind(j) {
+            Some(f) => (f.kind, f.value, f.margin, f.mixed_margin),
+            None => (
+                r.kind,
+                r.value,
+                r.margin_over(r.next_kind_drop),
+                -r.margin_over(r.mixed_drop),
+            ),
+        };
+        if margin < DATA_MARGIN || mixed >= PAIR_INSIGNIFICANT {
+            return None;
+        }
+        let whitened = self.whitened_kind(j).is_some();
+        match kind {
+            ChangeKind::Gain if value < 1.0 - p.loe_tau => Some(FaultClass::LossOfEffectiveness),
+            // Hovering, a motor's gain and offset differ only through its command's few per
+            // cent of variation, which the plain fit weighs against the wind: only the
+            // whitened comparison tells them.
+            ChangeKind::Offset if value.abs() > p.bias_tau && (self.is_angle[j] || whitened) => {
+                Some(FaultClass::Bias)
+            }
+            ChangeKind::Stuck => Some(FaultClass::Stuck),
+            _ => None,
+        }
+    }
+    /// Whether the command separates gain and bias (its std over the window at least
+    /// `excitation_min_std`, the MIT-UKF's gamma std at most `sigma_gamma_max`); the reason
+    /// when not.
+    pub(super) fn separable(&self, j: usize) -> Result<(), String> {
+        let st = &self.actuators[j];
+        let var_gamma = st.channels[0].last.block[0];
+        let sigma_gamma = if var_gamma.is_nan() {
+            f64::NAN
+        } else {
+            var_gamma.max(0.0).sqrt()
+        };
+        let p = &self.params;
+        if st.u.sd() >= p.excitation_min_std && sigma_gamma <= p.sigma_gamma_max {
+            Ok(())
+        } else {
+            Err(format!(
+                "command std {:.4} over {} s, gamma std {:.3}: gain and bias not separable (the command must move by {} or more)",
+                st.u.sd(),
+                p.window_s,
+                sigma_gamma,
+                p.excitation_min_std
+            ))
+        }
+    }
+    /// C2: the class from the MIT-UKF's estimate and its bounds, and whether it is only the
+    /// mixed fallback. A kind is told when its coefficient is beyond its tolerance with bounds
+    /// excluding the healthy value, and the other's bounds reach within its tolerance; any
+    /// other change (both beyond, or a gain above 1) is mixed: a loss only if one could make it (the output moved toward zero by no
+    /// more than the command), else a bias. `None` while the bounds tell nothing. Never stuck:
+    /// the filters have no stuck state, and a gain swinging through zero while it converges
+    /// looks like one; only the data tell a stuck output (C1).
+    pub(super) fn filter_class(&self, j: usize) -> Option<(FaultClass, bool)> {
+        let p = &self.params;
+        let st = &self.actuators[j];
+        let e = st.channels[0].last;
+        let gain_off = (e.gamma - 1.0).abs() > p.loe_tau && (e.gamma_hi < 1.0 || e.gamma_lo > 1.0);
+        let bias_off = e.delta.abs() > p.bias_tau && (e.delta_lo > 0.0 || e.delta_hi < 0.0);
+        let gain_held = e.gamma_lo <= 1.0 + p.loe_tau && 1.0 - p.loe_tau <= e.gamma_hi;
+        let bias_held = e.delta_lo <= p.bias_tau && -p.bias_tau <= e.delta_hi;
+        if gain_off && e.gamma < 1.0 && bias_held {
+            return Some((FaultClass::LossOfEffectiveness, false));
+        }
+        if bias_off && gain_held {
+            return Some((FaultClass::Bias, false));
+        }
+        if !(gain_off || bias_off) {
+            return None;
+        }
+        let off = st.channels[0].e;
+        let loss = off * st.u.mean.signum() < 0.0 && off.abs() <= st.u.mean.abs() && e.gamma < 1.0;
+        let class = if loss {
+            FaultClass::LossOfEffectiveness
+        } else {
+            FaultClass::Bias
+        };
+        Some((class, true))
+    }
+    /// C1, else C2 when separable, else C3: the class, its rule, whether it is the mixed
+    /// fallback, and why there is none.
+    pub(super) fn classify(&self, j: usize) -> (FaultClass, Rule, bool, Option<String>) {
+        if let Some(c) = self.data_class(j) {
+            return (c, Rule::C1, false, None);
+        }
+        match self.separable(j).map(|()| self.filter_class(j)) {
+            Ok(Some((c, mixed))) => (c, Rule::C2, mixed, None),
+            Ok(None) => (
+                FaultClass::Unclassified,
+                Rule::C3,
+                false,
+                Some(
+                    "the MIT-UKF's bounds do not yet tell a gain from a bias: the class follows"
+                        .into(),
+                ),
+            ),
+            Err(why) => (FaultClass::Unclassified, Rule::C3, false, Some(why)),
+        }
+    }
+    /// Actuator `j`'s fault in force as the change test identifies it, for the filters'
+    /// identification (`VehicleFilters::hold_class`): when the class in force is a loss, a bias
+    /// or a stuck output, the fault is alone, and the data fit that kind clearly, the changed
+    /// coefficient from the fit and the other at its healthy value within the tolerance that
+    /// tells the class (as 3σ).
+    pub fn identified(&self, j: usize) -> Option<Identified> {
+        let p = &self.params;
+        let class = self.active(j)?;
+        if self.actuators[j].class_mixed
+            || (0..self.actuators.len()).any(|k| k != j && self.active(k).is_some())
+        {
+            return None;
+        }
+        let r = self.reading.filter(|r| r.actuator == j)?;
+        let fit = self.change.whitened_gain_or_offset(j, r.samples);
+        let whitened = fit.filter(|_| r.kind != ChangeKind::Stuck);
+        let (kind, value, std) = match (r.kind, fit) {
+            (ChangeKind::Stuck, Some(f)) => (r.kind, f.stuck_value, f.stuck_std),
+            _ => whitened.map_or((r.kind, r.value, r.value_std), |f| {
+                (f.kind, f.value, f.value_std)
+            }),
+        };
+        let (margin, mixed_margin) = whitened.map_or(
+            (
+                r.margin_over(r.next_kind_drop),
+                -r.margin_over(r.mixed_drop),
+            ),
+            |f| (f.margin, f.mixed_margin),
+        );
+        let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
+        let motor_offset_plain =
+            whitened.is_none() && kind == ChangeKind::Offset && self.isolation.is_motor[j];
+        if !long || margin < DATA_MARGIN || mixed_margin >= DATA_MARGIN || motor_offset_plain {
+            return None;
+        }
+        if !(value.is_finite() && std.is_finite() && std > 0.0) {
+            return None;
+        }
+        let kind = match (class, kind) {
+            (FaultClass::LossOfEffectiveness, ChangeKind::Gain) => IdentifiedKind::Gain,
+            (FaultClass::Bias, ChangeKind::Offset) => IdentifiedKind::Offset,
+            (FaultClass::Stuck, ChangeKind::Stuck) => IdentifiedKind::Stuck,
+            _ => return None,
+        };
+        let fitted = (value, std);
+        let (gamma, delta) = match kind {
+            IdentifiedKind::Gain => (fitted, (0.0, p.bias_tau / 3.0)),
+            IdentifiedKind::Offset => ((1.0, p.loe_tau / 3.0), fitted),
+            IdentifiedKind::Stuck => ((0.0, p.stuck_gamma / 3.0), fitted),
+        };
+        Some(Identified {
+            kind,
+            gamma: gamma.0,
+            gamma_std: gamma.1,
+            delta: delta.0,
+            delta_std: delta.1,
+            tolerance: match kind {
+                IdentifiedKind::Gain => p.loe_tau,
+                _ => p.bias_tau,
+            },
+        })
+    }
+    /// What the change test reads for actuator `j`, for a decision's detail.
+    pub(super) fn data_note(&self, j: usize) -> Option<String> {
+        let r = self.reading.filter(|r| r.actuator == j)?;
+        let (kind, value) = self
+            .whitened_kind(j)
+            .map_or((r.kind, r.value), |f| (f.kind, f.value));
+        let what = match kind {
+            ChangeKind::Gain => format!("a gain of {value:.2}"),
+            ChangeKind::Offset => format!("an offset of {value:+.3}"),
+            ChangeKind::Stuck => format!("an output stuck at {value:.3}"),
+        };
+        let since = if r.samples >= self.change.len() {
+            "since at least"
+        } else {
+            "since"
+        };
+        let how = if self.data_class(j).is_some() {
+            "clearly"
+        } else {
+            "not clearly"
+        };
+        Some(format!(
+            "{since} t={:.2} s the data fit {what} best, {how}",
+            r.since
+        ))
+    }
+}
