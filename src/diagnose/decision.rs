@@ -148,6 +148,8 @@ pub enum Rule {
     R1,
     /// Not judged: gain and bias not separable (a statement, `excitation_low`).
     G1,
+    /// Out of the flight envelope: a decision made then is marked `in_crash`.
+    X1,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -230,6 +232,10 @@ pub struct Decision {
     /// The rule that made the decision (`docs/diagnosis.md`, the rule table).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rule: Option<Rule>,
+    /// Made while the vehicle was out of its flight envelope (rule X1): the model does not hold
+    /// there, and the decision describes the crash rather than an actuator.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub in_crash: bool,
     /// Free text: the evidence, and what the data cannot tell.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detail: Option<String>,
@@ -253,6 +259,7 @@ impl Decision {
             confidence: 0.0,
             also: vec![],
             rule: None,
+            in_crash: false,
             detail: Some(detail.into()),
         }
     }

@@ -61,9 +61,13 @@ impl Diagnoser {
             Some(Rule::F3)
         } else if alarms != 0 && named.is_none_or(|k| k == j) {
             let waited = st.first_alarm().is_some_and(|t1| t - t1 >= DATA_WAIT_S);
-            // The change test fits one change: with a fault in force, its best fit is that
-            // fault's and says nothing against this alarm.
-            let agree = best.is_some_and(|k| k == j || self.active(k).is_some());
+            // The change test fits one change: with a fault in force since before this alarm's
+            // wait (its onset's spread over other actuators has had its time), its best fit is
+            // that fault's and says nothing against this alarm.
+            let older = |k: usize| {
+                self.active(k).is_some() && t - self.actuators[k].decided_at >= DATA_WAIT_S
+            };
+            let agree = best.is_some_and(|k| k == j || older(k));
             if agree {
                 Some(Rule::F1)
             } else if waited {
@@ -147,6 +151,7 @@ impl Diagnoser {
         st.class_from_data = class_rule == Rule::C1;
         st.class_mixed = mixed;
         st.class_candidate = None;
+        st.decided_at = t;
     }
     /// A fault in force: R1 clears it; otherwise a class read anew replaces the one in force
     /// once it has held `CLASS_HOLD_S`, the data's class outranking the filters'.
@@ -293,6 +298,7 @@ impl Diagnoser {
             confidence,
             also: vec![],
             rule: Some(rule),
+            in_crash: false,
             detail: None,
         }
     }
@@ -306,7 +312,7 @@ fn class_rule_text(rule: Rule) -> &'static str {
     }
 }
 
-fn append_detail(d: &mut Decision, note: String) {
+pub(super) fn append_detail(d: &mut Decision, note: String) {
     d.detail = Some(match d.detail.take() {
         Some(s) => format!("{s}; {note}"),
         None => note,

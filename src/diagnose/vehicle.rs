@@ -57,6 +57,15 @@ const COLOUR_MEMORY_S: f64 = 60.0;
 /// `CHANGE_MIN_S` to fit and about a second to be clear; a filters' misreading at a fault's
 /// onset ends within their alarm plus `clear_s`.
 const DATA_WAIT_S: f64 = 3.0;
+/// The flight envelope of rule X1: roll or pitch beyond twice the autopilots' default lean
+/// limit (ArduCopter's `ANGLE_MAX` 30°, ArduPlane's `LIM_ROLL_CD` 45°), or a measured vertical
+/// specific force under 0.3 g (free fall), for `ENVELOPE_S`. The rate model is identified about
+/// controlled flight; beyond it a decision describes the crash, not an actuator.
+const ENVELOPE_ROTORCRAFT_RAD: f64 = 60.0 * std::f64::consts::PI / 180.0;
+const ENVELOPE_PLANE_RAD: f64 = 90.0 * std::f64::consts::PI / 180.0;
+const FREE_FALL_G: f64 = 0.3;
+const ENVELOPE_S: f64 = 0.2;
+
 /// A new class must hold this long before a `changed` decision reports it (s).
 const CLASS_HOLD_S: f64 = 1.0;
 /// A single kind is the data's class only where a gain and an offset together do not fit
@@ -111,8 +120,9 @@ struct Actuator {
     u: Moments,
     channels: [Channel; 2],
     health: Health,
-    /// Filters (bit f) that have alarmed on the fault in force.
+    /// Filters (bit f) that have alarmed on the fault in force, and when it was decided.
     decided_filters: u8,
+    decided_at: f64,
     /// The class in force came from the data (C1), or from the filters' mixed fallback (a
     /// tie-break, not a kind: the filters are not held to it).
     class_from_data: bool,
@@ -160,6 +170,11 @@ pub struct Diagnoser {
     whitened: Option<KindFit>,
     /// The reading came from the whitened search.
     reading_whitened: bool,
+    /// Rule X1: the lean limit, since when the vehicle has been out of its envelope and why,
+    /// and whether that has lasted `ENVELOPE_S` (a crash).
+    envelope_rad: f64,
+    outside: Option<(f64, String)>,
+    crashing: bool,
 }
 
 impl Diagnoser {
@@ -209,7 +224,39 @@ impl Diagnoser {
             reading: None,
             whitened: None,
             reading_whitened: false,
+            envelope_rad: if profile.vehicle == crate::telemetry::VehicleKind::Plane {
+                ENVELOPE_PLANE_RAD
+            } else {
+                ENVELOPE_ROTORCRAFT_RAD
+            },
+            outside: None,
+            crashing: false,
         }
+    }
+
+    /// Rule X1, before each `update`: the attitude and, where measured, the vertical specific
+    /// force (m/s², about -9.8 in level flight).
+    pub fn envelope(&mut self, t: f64, attitude: [f64; 3], az: Option<f64>) {
+        let lean = attitude[0].abs().max(attitude[1].abs());
+        let why = if lean > self.envelope_rad {
+            Some(format!(
+                "roll {:.0}°, pitch {:.0}°",
+                attitude[0].to_degrees(),
+                attitude[1].to_degrees()
+            ))
+        } else {
+            az.filter(|a| a.abs() < FREE_FALL_G * 9.80665)
+                .map(|a| format!("free fall (a_z {a:+.1} m/s²)"))
+        };
+        self.outside = match (why, self.outside.take()) {
+            (Some(_), Some(was)) => Some(was),
+            (Some(why), None) => Some((t, why)),
+            (None, _) => None,
+        };
+        self.crashing = self
+            .outside
+            .as_ref()
+            .is_some_and(|(t0, _)| t - t0 >= ENVELOPE_S);
     }
 
     /// Feed the healthy model's residual of this step and the commands that acted, before
@@ -459,12 +506,22 @@ impl Diagnoser {
         }
         let data_alarm = self.data_alarm();
         let named = self.naming_reading().map(|r| r.actuator);
+        let from = out.len();
         for j in 0..self.actuators.len() {
             self.gate(t, j, out);
             self.track_bounds(j);
             match self.actuators[j].health {
                 Health::Fault(class) => self.in_force(t, j, class, data_alarm, out),
                 health => self.judge(t, j, health, data_alarm, named, out),
+            }
+        }
+        if let Some((since, why)) = self.outside.as_ref().filter(|_| self.crashing) {
+            let note = format!(
+                "in a crash since t={since:.2} s ({why}): out of the flight envelope, the model does not hold (X1)"
+            );
+            for d in &mut out[from..] {
+                d.in_crash = true;
+                rules::append_detail(d, note.clone());
             }
         }
     }

@@ -391,3 +391,35 @@ fn f3_a_clear_reading_as_large_as_a_fault_decides_what_the_estimates_show_weakly
     assert!(t < 19.0, "{t}");
     assert_eq!(run(false), None);
 }
+
+#[test]
+fn x1_a_decision_out_of_the_flight_envelope_is_marked_as_a_crash() {
+    // Quad X, motor 2 at gamma 0.6 from 8 s; from 7.7 s the vehicle rolls past 70°.
+    let run = |crash: bool| {
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
+        let mut out = vec![];
+        let mut all = vec![];
+        for k in 0..700 {
+            let t = k as f64 * DT;
+            let mut e = vec![healthy(0.02); 4];
+            if t >= 8.0 {
+                e[1] = estimate(0.6, 0.05, 0.0, 0.02);
+            }
+            let roll = if crash && t >= 7.7 {
+                70f64.to_radians()
+            } else {
+                0.0
+            };
+            d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
+            d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
+            all.append(&mut out);
+        }
+        all.into_iter().find(|x| x.event == Event::Fault).unwrap()
+    };
+    let crashed = run(true);
+    assert!(crashed.in_crash, "{crashed:?}");
+    assert!(crashed.detail.unwrap().contains("(X1)"));
+    let flying = run(false);
+    assert!(!flying.in_crash && !flying.detail.unwrap().contains("X1"));
+}

@@ -136,6 +136,7 @@ pub fn run_vehicle_scenario(
             input: &s.u[..l],
             y: &s.y[..m],
             acting: &s.u[..l],
+            attitude: s.attitude,
             residual_from: rates_prev.as_ref(),
         };
         let t0 = Instant::now();

@@ -193,6 +193,7 @@ impl VehiclePipeline {
             input: &input[..n_in],
             y: &y[..r.m],
             acting: &prev_u[..r.l],
+            attitude: s.attitude,
             residual_from: (!gap && own_inputs).then_some(&rates_before),
         };
         r.core.step(&step, &mut self.counters, sink);

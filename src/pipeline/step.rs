@@ -52,6 +52,9 @@ pub struct StepInput<'a> {
     /// The actuators' commands acting over the period (one per actuator), as the diagnosis
     /// weighs them.
     pub acting: &'a [f64],
+    /// The vehicle's attitude [roll, pitch, yaw] (rad) at `t`: whether it is still in its flight
+    /// envelope (a crash's decisions are marked as such).
+    pub attitude: [f64; 3],
     /// The measured rates one period before `y`, when this step's residual may feed the
     /// change test: the period was not a hole and its inputs are measured ones. `None` skips
     /// the change test for this step.
@@ -106,6 +109,8 @@ impl Core {
         }
         let views = [&self.est[0][..l], &self.est[1][..l]];
         self.decisions.clear();
+        let az = (s.y.len() > 3).then(|| s.y[3]);
+        self.diag.envelope(s.t, s.attitude, az);
         self.diag.update(s.t, s.acting, &views, &mut self.decisions);
         for f in 0..2 {
             for j in 0..l {

@@ -1,0 +1,47 @@
+//! `ahcmon eval --matrix --fast`: the scenario matrix's fast subset (every built-in vehicle ×
+//! every actuator × a loss to 0.5 and a bias of +0.15 in steady flight with the built-in
+//! weather, and two healthy minutes per vehicle), flown through the replay pipeline and
+//! scored against the simulator's truth and the oracle. The whole matrix is `ahcmon eval
+//! --matrix --seeds N` (docs/results.md).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use common::ahcmon;
+
+#[test]
+fn the_fast_matrix_meets_the_detection_class_and_healthy_lines() {
+    let (code, out, err) = ahcmon(&[
+        "eval",
+        "--matrix",
+        "--fast",
+        "--healthy-minutes",
+        "2",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rows = doc["report"].as_array().unwrap();
+    let cases = doc["cases"].as_array().unwrap();
+    // 21 actuators × 2 faults + 5 healthy flights.
+    assert_eq!(cases.len(), 47);
+    let all = rows
+        .iter()
+        .find(|r| r["vehicle"] == "all" && r["kind"] == "all")
+        .unwrap();
+    let n = |k: &str| all[k].as_u64().unwrap() as f64;
+    // Losses to 0.5 and offsets of 0.15 are within the oracle's reach on (nearly) every case.
+    assert!(n("detectable") >= 40.0, "{all}");
+    assert!(n("named_right") >= 0.95 * n("detectable"), "{all}");
+    assert!(all["delay_p50_s"].as_f64().unwrap() <= 1.0, "{all}");
+    assert!(n("class_right") >= 0.9 * n("named_right"), "{all}");
+    assert_eq!(n("undetectable_wrong"), 0.0, "{all}");
+    assert_eq!(n("false_before_onset"), 0.0, "{all}");
+    assert_eq!(n("false_healthy"), 0.0, "{all}");
+    assert!(all["healthy_h"].as_f64().unwrap() > 0.1, "{all}");
+    // A fault case has the oracle's non-centrality, a healthy flight none.
+    for c in cases {
+        let fault = !c["case"]["fault"].is_null();
+        assert_eq!(fault, !c["oracle_lambda"].is_null(), "{c}");
+    }
+}
