@@ -4,6 +4,15 @@
 
 use super::*;
 
+/// Why a fault has no class (C3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum NoClass {
+    /// The command does not move enough to tell a gain from an offset.
+    NotSeparable,
+    /// The MIT-UKF's bounds do not exclude either explanation.
+    BoundsTellNothing,
+}
+
 impl Diagnoser {
     /// A motor's or throttle's gain-or-offset comparison on the whitened residual, for the
     /// reading's actuator.
@@ -84,30 +93,46 @@ impl Diagnoser {
             _ => None,
         }
     }
-    /// Whether the command separates gain and bias (its std over the window at least
-    /// `excitation_min_std`, the MIT-UKF's gamma std at most `sigma_gamma_max`); the reason
-    /// when not.
-    pub(super) fn separable(&self, j: usize) -> Result<(), String> {
+    /// Whether the command separates gain and bias: its std over the window at least
+    /// `excitation_min_std`, the MIT-UKF's gamma std at most `sigma_gamma_max` (a NaN spread is
+    /// no evidence of excitation).
+    pub(super) fn separable(&self, j: usize) -> bool {
         let st = &self.actuators[j];
-        let var_gamma = st.channels[0].last.block[0];
-        let sigma_gamma = if var_gamma.is_nan() {
+        let p = &self.params;
+        st.u.sd() >= p.excitation_min_std && self.sigma_gamma(j) <= p.sigma_gamma_max
+    }
+
+    fn sigma_gamma(&self, j: usize) -> f64 {
+        let var_gamma = self.actuators[j].channels[0].last.block[0];
+        if var_gamma.is_nan() {
             f64::NAN
         } else {
             var_gamma.max(0.0).sqrt()
-        };
-        let p = &self.params;
-        if st.u.sd() >= p.excitation_min_std && sigma_gamma <= p.sigma_gamma_max {
-            Ok(())
-        } else {
-            Err(format!(
-                "command std {:.4} over {} s, gamma std {:.3}: gain and bias not separable (the command must move by {} or more)",
-                st.u.sd(),
-                p.window_s,
-                sigma_gamma,
-                p.excitation_min_std
-            ))
         }
     }
+
+    /// Why gain and bias are not separable, for a decision's detail.
+    pub(super) fn not_separable(&self, j: usize) -> String {
+        let p = &self.params;
+        format!(
+            "command std {:.4} over {} s, gamma std {:.3}: gain and bias not separable (the command must move by {} or more)",
+            self.actuators[j].u.sd(),
+            p.window_s,
+            self.sigma_gamma(j),
+            p.excitation_min_std
+        )
+    }
+
+    /// A class's missing reason as text.
+    pub(super) fn why_text(&self, j: usize, why: NoClass) -> String {
+        match why {
+            NoClass::NotSeparable => self.not_separable(j),
+            NoClass::BoundsTellNothing => {
+                "the MIT-UKF's bounds do not yet tell a gain from a bias: the class follows".into()
+            }
+        }
+    }
+
     /// C2: the class from the MIT-UKF's estimate and its bounds, and whether it is only the
     /// mixed fallback. A kind is told when its coefficient is beyond its tolerance with bounds
     /// excluding the healthy value, and the other's bounds reach within its tolerance; any
@@ -143,24 +168,29 @@ impl Diagnoser {
     }
     /// C1, else C2 when separable, else C3: the class, its rule, whether it is the mixed
     /// fallback, and why there is none.
-    pub(super) fn classify(&self, j: usize) -> (FaultClass, Rule, bool, Option<String>) {
+    pub(super) fn classify(&self, j: usize) -> (FaultClass, Rule, bool, Option<NoClass>) {
         if let Some(c) = self.data_class(j) {
             return (c, Rule::C1, false, None);
         }
-        match self.separable(j).map(|()| self.filter_class(j)) {
-            Ok(Some((c, mixed))) => (c, Rule::C2, mixed, None),
-            Ok(None) => (
+        if !self.separable(j) {
+            return (
                 FaultClass::Unclassified,
                 Rule::C3,
                 false,
-                Some(
-                    "the MIT-UKF's bounds do not yet tell a gain from a bias: the class follows"
-                        .into(),
-                ),
+                Some(NoClass::NotSeparable),
+            );
+        }
+        match self.filter_class(j) {
+            Some((c, mixed)) => (c, Rule::C2, mixed, None),
+            None => (
+                FaultClass::Unclassified,
+                Rule::C3,
+                false,
+                Some(NoClass::BoundsTellNothing),
             ),
-            Err(why) => (FaultClass::Unclassified, Rule::C3, false, Some(why)),
         }
     }
+
     /// Actuator `j`'s fault in force as the change test identifies it, for the filters'
     /// identification (`VehicleFilters::hold_class`): when the class in force is a loss, a bias
     /// or a stuck output, the fault is alone, and the data fit that kind clearly, the changed

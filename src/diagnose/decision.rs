@@ -131,6 +131,8 @@ pub enum Rule {
     S1,
     /// Suspect: a filter alarm (D1) the data do not yet confirm.
     S2,
+    /// Suspect → healthy: no alarm, and the bounds hold the healthy point again.
+    S3,
     /// Fault: a filter alarm whose actuator the change test fits best.
     F1,
     /// Fault: a filter alarm the data have not contradicted within `DATA_WAIT_S`.
@@ -144,6 +146,9 @@ pub enum Rule {
     C2,
     /// No class: the excitation cannot separate gain and bias.
     C3,
+    /// A fault in force changed: a class held `CLASS_HOLD_S` on evidence of the fault as it
+    /// is now, or another filter alarming on it.
+    K1,
     /// Cleared: no alarm for `clear_s` and the data do not name it.
     R1,
     /// Not judged: gain and bias not separable (a statement, `excitation_low`).

@@ -1,50 +1,56 @@
-//! The state machine's transitions (rules S1, S2, F1-F3, K1, R1, G1 of `docs/diagnosis.md`)
+//! The state machine's transitions (rules S1-S3, F1-F3, K1, R1, G1 of `docs/diagnosis.md`)
 //! and the decisions they make.
 
 use super::*;
 
 impl Diagnoser {
-    /// G1: say once when gain and bias cannot be told apart (again after the command has been
-    /// exciting in between); no fault needs it.
+    /// G1: say once when gain and bias cannot be told apart (again after they have been
+    /// separable in between); not while a fault is in force, whose class says it (C3).
     pub(super) fn gate(&mut self, t: f64, j: usize, out: &mut Vec<Decision>) {
-        let why = self.separable(j).err();
+        let separable = self.separable(j);
         let st = &mut self.actuators[j];
-        st.low_for = if why.is_some() {
-            st.low_for + self.dt
-        } else {
-            0.0
-        };
-        let Some(why) = why else {
+        st.low_for = if separable { 0.0 } else { st.low_for + self.dt };
+        if separable {
             st.excitation_reported = false;
             return;
-        };
+        }
         if st.low_for >= self.params.window_s
             && !st.excitation_reported
             && !matches!(st.health, Health::Fault(_))
         {
             st.excitation_reported = true;
             let mut d = self.decision(t, j, Event::ExcitationLow, None, 0, Rule::G1);
-            d.detail = Some(why);
+            d.detail = Some(self.not_separable(j));
             out.push(d);
         }
     }
+
     /// S1's timers: how long the MIT-UKF's bounds have excluded, or included, the healthy point.
     pub(super) fn track_bounds(&mut self, j: usize) {
         let st = &mut self.actuators[j];
         let e = st.channels[0].last;
-        let inside =
-            e.gamma_lo <= 1.0 && 1.0 <= e.gamma_hi && e.delta_lo <= 0.0 && 0.0 <= e.delta_hi;
         // A non-finite bound (a failing filter) is no evidence either way.
-        if !(e.gamma_lo.is_finite() && e.gamma_hi.is_finite()) {
+        let bounds = [e.gamma_lo, e.gamma_hi, e.delta_lo, e.delta_hi];
+        if !bounds.iter().all(|b| b.is_finite()) {
             return;
         }
+        let inside =
+            e.gamma_lo <= 1.0 && 1.0 <= e.gamma_hi && e.delta_lo <= 0.0 && 0.0 <= e.delta_hi;
         if inside {
             (st.bounds_out, st.bounds_in) = (0.0, st.bounds_in + self.dt);
         } else {
             (st.bounds_out, st.bounds_in) = (st.bounds_out + self.dt, 0.0);
         }
     }
-    /// A healthy or suspect actuator: F1-F3 decide a fault, S1-S2 make it suspect.
+
+    /// A fault in force that has stood `DATA_WAIT_S`: its onset's spread over other actuators
+    /// has had its time, and the change test's fit of it says nothing against another alarm.
+    fn older(&self, t: f64, k: usize) -> bool {
+        self.active(k).is_some() && t - self.actuators[k].decided_at >= DATA_WAIT_S
+    }
+
+    /// A healthy or suspect actuator: F1-F3 decide a fault, S1-S2 make it suspect, S3 ends a
+    /// suspicion.
     pub(super) fn judge(
         &mut self,
         t: f64,
@@ -54,23 +60,27 @@ impl Diagnoser {
         named: Option<usize>,
         out: &mut Vec<Decision>,
     ) {
-        let st = &self.actuators[j];
-        let alarms = st.alarms();
+        let alarms = self.actuators[j].alarms();
         let best = self.reading.map(|r| r.actuator);
+        // The data name another actuator clearly: this alarm is its evidence, even when that
+        // actuator's fault is in force (the filters spread a fault over other actuators for as
+        // long as it lasts; a second fault under it is listed in its `also`).
+        let named_other = named.filter(|&k| k != j);
+        if alarms == 0 {
+            self.actuators[j].contradicted_at = f64::NEG_INFINITY;
+        } else if named_other.is_some() {
+            self.actuators[j].contradicted_at = t;
+        }
+        let st = &self.actuators[j];
         let rule = if data_alarm == Some(j) {
             Some(Rule::F3)
-        } else if alarms != 0 && named.is_none_or(|k| k == j) {
-            let waited = st.first_alarm().is_some_and(|t1| t - t1 >= DATA_WAIT_S);
-            // The change test fits one change: with a fault in force since before this alarm's
-            // wait (its onset's spread over other actuators has had its time), its best fit is
-            // that fault's and says nothing against this alarm.
-            let older = |k: usize| {
-                self.active(k).is_some() && t - self.actuators[k].decided_at >= DATA_WAIT_S
-            };
-            let agree = best.is_some_and(|k| k == j || older(k));
-            if agree {
+        } else if alarms != 0 && named_other.is_none() {
+            // F2: the data have had the wait since the alarm, or since they last named another
+            // actuator clearly, and named none.
+            let since = st.first_alarm().unwrap_or(t).max(st.contradicted_at);
+            if best.is_some_and(|k| k == j || self.older(t, k)) {
                 Some(Rule::F1)
-            } else if waited {
+            } else if t - since >= DATA_WAIT_S {
                 Some(Rule::F2)
             } else {
                 None
@@ -83,39 +93,45 @@ impl Diagnoser {
             return;
         }
         let suspect = if alarms != 0 {
-            let why = match named.or(best) {
-                Some(k) if k != j && named.is_some() => format!(
-                    "the filters alarm; the data name {} clearly, whose evidence this is",
-                    self.names[k]
-                ),
-                Some(k) if k != j => format!(
-                    "the filters alarm; the data fit {} best so far (not clearly)",
-                    self.names[k]
-                ),
-                _ => "the filters alarm; the data have no fit yet".into(),
-            };
-            Some((Rule::S2, why))
+            Some(Rule::S2)
         } else if st.bounds_out >= self.params.suspect_s {
-            let e = st.channels[0].last;
-            Some((
-                Rule::S1,
-                format!(
-                    "the MIT-UKF's bounds exclude the healthy point for {:.1} s (gamma {:.3} [{:.3}, {:.3}], delta {:+.3} [{:+.3}, {:+.3}]) while no alarm reaches its threshold: the deviation is within what healthy flights show",
-                    st.bounds_out, e.gamma, e.gamma_lo, e.gamma_hi, e.delta, e.delta_lo, e.delta_hi
-                ),
-            ))
+            Some(Rule::S1)
         } else {
             None
         };
         match (health, suspect) {
-            (Health::Healthy, Some((rule, why))) => {
+            (Health::Healthy, Some(rule)) => {
+                let e = st.channels[0].last;
+                let why = match rule {
+                    Rule::S1 => format!(
+                        "the MIT-UKF's bounds exclude the healthy point for {:.1} s (gamma {:.3} [{:.3}, {:.3}], delta {:+.3} [{:+.3}, {:+.3}]) while no alarm reaches its threshold: the deviation is within what healthy flights show",
+                        st.bounds_out,
+                        e.gamma,
+                        e.gamma_lo,
+                        e.gamma_hi,
+                        e.delta,
+                        e.delta_lo,
+                        e.delta_hi
+                    ),
+                    _ => match named.or(best) {
+                        Some(k) if k != j && named.is_some() => format!(
+                            "the filters alarm; the data name {} clearly, whose evidence this is",
+                            self.names[k]
+                        ),
+                        Some(k) if k != j => format!(
+                            "the filters alarm; the data fit {} best so far (not clearly)",
+                            self.names[k]
+                        ),
+                        _ => "the filters alarm; the data have no fit yet".into(),
+                    },
+                };
                 let mut d = self.decision(t, j, Event::Suspect, None, alarms, rule);
                 d.detail = Some(why);
                 out.push(d);
                 self.actuators[j].health = Health::Suspect;
             }
             (Health::Suspect, None) if st.bounds_in >= self.params.clear_s => {
-                let mut d = self.decision(t, j, Event::SuspectCleared, None, 0, Rule::R1);
+                let mut d = self.decision(t, j, Event::SuspectCleared, None, 0, Rule::S3);
                 d.detail = Some(format!(
                     "no alarm, and the MIT-UKF's bounds hold the healthy point again for {} s",
                     self.params.clear_s
@@ -126,9 +142,11 @@ impl Diagnoser {
             _ => {}
         }
     }
+
     /// A fault decision on `j` by `rule`.
     pub(super) fn decide(&mut self, t: f64, j: usize, rule: Rule, out: &mut Vec<Decision>) {
         let (class, class_rule, mixed, why) = self.classify(j);
+        let why = why.map(|w| self.why_text(j, w));
         let filters = self.actuators[j].alarms();
         let mut d = self.decision(t, j, Event::Fault, Some(class), filters, rule);
         d.also = self.also(j);
@@ -152,6 +170,7 @@ impl Diagnoser {
         st.class_mixed = mixed;
         st.class_candidate = None;
         st.decided_at = t;
+        st.decided_by = Some(rule);
     }
     /// A fault in force: R1 clears it; otherwise a class read anew replaces the one in force
     /// once it has held `CLASS_HOLD_S`, the data's class outranking the filters'.
@@ -168,7 +187,11 @@ impl Diagnoser {
         // (The data naming the actuator do not hold the fault: after its end the store still
         // holds it, and its end is a change too. A data alarm needs a change that began inside
         // the store, which the end of a fault is not.)
-        if alarms == 0 && data_alarm != Some(j) {
+        // A fault the data alone decided (F3) stands while they name it clearly: once it is in
+        // force the whitened search gives way to the plain one, so no data alarm follows it.
+        let data_hold = st.decided_by == Some(Rule::F3)
+            && self.naming_reading().is_some_and(|r| r.actuator == j);
+        if alarms == 0 && data_alarm != Some(j) && !data_hold {
             let mut d = self.decision(t, j, Event::Cleared, None, 0, Rule::R1);
             d.detail = Some(format!(
                 "no filter alarm for {} s and no data alarm",
@@ -230,7 +253,7 @@ impl Diagnoser {
         }
         let union = self.actuators[j].decided_filters | alarms;
         if next != prev || union != self.actuators[j].decided_filters {
-            let mut d = self.decision(t, j, Event::Changed, Some(next), union, rule);
+            let mut d = self.decision(t, j, Event::Changed, Some(next), union, Rule::K1);
             d.also = self.also(j);
             if next != prev {
                 d.detail = Some(format!("class by {}", class_rule_text(rule)));

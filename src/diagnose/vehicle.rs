@@ -83,6 +83,10 @@ struct Moments {
 
 impl Moments {
     fn push(&mut self, x: f64, a: f64) {
+        // A non-finite command (a corrupt sample) would spoil the window for good.
+        if !x.is_finite() {
+            return;
+        }
         if !self.init {
             self.mean = x;
             self.init = true;
@@ -120,9 +124,14 @@ struct Actuator {
     u: Moments,
     channels: [Channel; 2],
     health: Health,
-    /// Filters (bit f) that have alarmed on the fault in force, and when it was decided.
+    /// Filters (bit f) that have alarmed on the fault in force, when and by which rule it was
+    /// decided.
     decided_filters: u8,
     decided_at: f64,
+    decided_by: Option<Rule>,
+    /// When the data last named another actuator clearly during this actuator's alarm (F2's
+    /// wait runs from then).
+    contradicted_at: f64,
     /// The class in force came from the data (C1), or from the filters' mixed fallback (a
     /// tie-break, not a kind: the filters are not held to it).
     class_from_data: bool,
@@ -238,21 +247,21 @@ impl Diagnoser {
     /// force (m/s², about -9.8 in level flight).
     pub fn envelope(&mut self, t: f64, attitude: [f64; 3], az: Option<f64>) {
         let lean = attitude[0].abs().max(attitude[1].abs());
-        let why = if lean > self.envelope_rad {
-            Some(format!(
-                "roll {:.0}°, pitch {:.0}°",
-                attitude[0].to_degrees(),
-                attitude[1].to_degrees()
-            ))
-        } else {
-            az.filter(|a| a.abs() < FREE_FALL_G * 9.80665)
-                .map(|a| format!("free fall (a_z {a:+.1} m/s²)"))
-        };
-        self.outside = match (why, self.outside.take()) {
-            (Some(_), Some(was)) => Some(was),
-            (Some(why), None) => Some((t, why)),
-            (None, _) => None,
-        };
+        let falling = az.is_some_and(|a| a.abs() < FREE_FALL_G * 9.80665);
+        if lean <= self.envelope_rad && !falling {
+            self.outside = None;
+        } else if self.outside.is_none() {
+            let why = if lean > self.envelope_rad {
+                format!(
+                    "roll {:.0}°, pitch {:.0}°",
+                    attitude[0].to_degrees(),
+                    attitude[1].to_degrees()
+                )
+            } else {
+                format!("free fall (a_z {:+.1} m/s²)", az.unwrap_or(0.0))
+            };
+            self.outside = Some((t, why));
+        }
         self.crashing = self
             .outside
             .as_ref()
@@ -268,11 +277,10 @@ impl Diagnoser {
             self.change.push(t, residual, u, true);
             return;
         }
-        let in_force: Vec<usize> = (0..self.actuators.len())
-            .filter(|&j| matches!(self.actuators[j].health, Health::Fault(_)))
-            .collect();
-        let alone = match in_force.as_slice() {
-            [j] if self.alarmed_elsewhere(*j) == 0 => Some(*j),
+        let mut in_force = (0..self.actuators.len())
+            .filter(|&j| matches!(self.actuators[j].health, Health::Fault(_)));
+        let alone = match (in_force.next(), in_force.next()) {
+            (Some(j), None) if self.alarmed_elsewhere(j) == 0 => Some(j),
             _ => None,
         };
         let identified = alone

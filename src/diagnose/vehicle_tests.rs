@@ -214,6 +214,9 @@ fn f1_an_alarm_the_data_fit_best_is_decided_at_once_and_f2_waits_without_them() 
             est,
             with_data.then_some(&change as Change),
         );
+        // One decision that stands while the data name it (no clearing and deciding again).
+        assert!(f.events(Event::Fault).len() <= 1, "{:?}", f.decisions);
+        assert!(f.events(Event::Cleared).is_empty(), "{:?}", f.decisions);
         f.events(Event::Fault)
             .first()
             .map(|d| (d.t, d.rule, d.actuator.clone()))
@@ -382,6 +385,9 @@ fn f3_a_clear_reading_as_large_as_a_fault_decides_what_the_estimates_show_weakly
         };
         let change = |t: f64, u: &[f64]| (1usize, if t >= 16.0 { -0.55 * u[1] } else { 0.0 });
         f.fly(0.0, 22.0, u, est, with_data.then_some(&change as Change));
+        // One decision that stands while the data name it (no clearing and deciding again).
+        assert!(f.events(Event::Fault).len() <= 1, "{:?}", f.decisions);
+        assert!(f.events(Event::Cleared).is_empty(), "{:?}", f.decisions);
         f.events(Event::Fault)
             .first()
             .map(|d| (d.t, d.rule, d.actuator.clone()))

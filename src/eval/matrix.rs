@@ -34,6 +34,8 @@ pub const FAULT_FLIGHT_S: f64 = 55.0;
 /// long after its decision.
 pub const NAME_WITHIN_S: f64 = 5.0;
 pub const JUDGE_AFTER_S: f64 = 5.0;
+/// How long the gain ramp runs.
+const RAMP_S: f64 = 8.0;
 /// MIT-UKF gamma and delta within this of the truth count as right.
 pub const ESTIMATE_TOLERANCE: f64 = 0.1;
 
@@ -73,7 +75,7 @@ impl FaultKind {
     /// judging time: the class definitions applied to the truth (`docs/diagnosis.md`), so a
     /// surface stuck at a trim near 0 (gain 0, no offset) is stuck or a loss, a gain ramp a
     /// drift while it moves and a loss either way.
-    pub fn right_class(self, class: &str, gamma: f64, delta: f64) -> bool {
+    pub fn right_class(self, class: &str, gamma: f64, delta: f64, t_sim: f64) -> bool {
         let p = crate::diagnose::vehicle::DiagnosisParams::default();
         let loss = gamma < 1.0 - p.loe_tau && delta.abs() <= p.bias_tau;
         let bias = delta.abs() > p.bias_tau && (gamma - 1.0).abs() <= p.loe_tau;
@@ -81,7 +83,7 @@ impl FaultKind {
             "loss_of_effectiveness" => loss,
             "bias" => bias,
             "stuck" => self == Self::StuckNearTrim,
-            "drift" => self == Self::RampTo060,
+            "drift" => self == Self::RampTo060 && t_sim < ONSET_S + RAMP_S,
             _ => false,
         }
     }
@@ -94,7 +96,7 @@ impl FaultKind {
             Self::BiasUp => "delta = 0.15".to_string(),
             Self::BiasDown => "delta = -0.15".to_string(),
             Self::StuckNearTrim => format!("stuck = {trim:.6}"),
-            Self::RampTo060 => "ramp = { duration_s = 8.0, gamma = 0.6 }".to_string(),
+            Self::RampTo060 => format!("ramp = {{ duration_s = {RAMP_S:.1}, gamma = 0.6 }}"),
         };
         format!("\n[[fault]]\nactuator = \"{actuator}\"\nt = {ONSET_S:.1}\n{what}\n")
     }
@@ -483,8 +485,13 @@ fn score(
         truth_at.iter().find(|(t, _, _)| *t >= at - 1e-9)
     });
     let class_right = match (&case.fault, judged) {
-        (Some((_, kind)), Some(&(_, g, dl))) => {
-            Some(class.as_deref().is_some_and(|c| kind.right_class(c, g, dl)))
+        (Some((_, kind)), Some(&(t, g, dl))) => {
+            let t_sim = t - BOOT_OFFSET_S;
+            Some(
+                class
+                    .as_deref()
+                    .is_some_and(|c| kind.right_class(c, g, dl, t_sim)),
+            )
         }
         _ => None,
     };
