@@ -72,13 +72,7 @@ pub async fn fly(
         let next = sim.step();
         msgs.clear();
         // The rates of this instant with the outputs commanded now (they act until the next).
-        let az = if vehicle.model.measure_az {
-            prev.y[3]
-        } else {
-            -9.80665
-        };
-        let rates = [prev.y[0], prev.y[1], prev.y[2]];
-        enc.messages(prev.t, rates, prev.attitude, az, &next.u[..l], &mut msgs);
+        enc.sample_messages(&prev, &next.u[..l], &mut msgs);
         if let Some(x) = opts.speed {
             tokio::time::sleep_until(started + std::time::Duration::from_secs_f64(prev.t / x))
                 .await;

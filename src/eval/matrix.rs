@@ -394,13 +394,7 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
             truth_at.push((prev.t + BOOT_OFFSET_S, prev.gamma[j], prev.delta[j]));
         }
         msgs.clear();
-        let az = if vehicle.model.measure_az {
-            prev.y[3]
-        } else {
-            -9.80665
-        };
-        let rates = [prev.y[0], prev.y[1], prev.y[2]];
-        enc.messages(prev.t, rates, prev.attitude, az, &next.u[..l], &mut msgs);
+        enc.sample_messages(&prev, &next.u[..l], &mut msgs);
         for m in msgs.drain(..) {
             let frame = Frame {
                 version: mavlink_core::MavlinkVersion::V2,

@@ -108,6 +108,24 @@ impl SimTelemetry {
         }
     }
 
+    /// Messages for a simulator sample: its rates (and a_z, where the profile measures it;
+    /// level flight's otherwise) with the outputs commanded next (`next_u`, acting until the
+    /// next sample), as an autopilot reports them.
+    pub fn sample_messages(
+        &mut self,
+        s: &crate::sim::vehicle::VehicleSample,
+        next_u: &[f64],
+        out: &mut Vec<MavMessage>,
+    ) {
+        let az = if self.profile.model.measure_az {
+            s.y[3]
+        } else {
+            -9.80665
+        };
+        let rates = [s.y[0], s.y[1], s.y[2]];
+        self.messages(s.t, rates, s.attitude, az, next_u, out);
+    }
+
     /// Messages for one instant `t` (s since the scenario start): the rates and a_z measured
     /// then, the outputs commanded then (normalised, acting until the next instant).
     pub fn messages(
