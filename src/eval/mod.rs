@@ -4,6 +4,7 @@
 pub mod bank;
 pub mod datasets;
 pub mod matrix;
+pub mod matrix_report;
 pub mod oracle;
 pub mod thresholds;
 pub mod vehicle;
