@@ -94,7 +94,7 @@ pub struct EvalArgs {
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
     /// Run each scenario with this many seeds (the scenario's seed, +1, +2, ...); with
-    /// --matrix, seeds 1 to this.
+    /// --matrix, each case this many times, numbered from one.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
     pub seeds: u64,
     /// Instead of scenarios: the scenario matrix. Every built-in vehicle x every actuator x
