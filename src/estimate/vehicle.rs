@@ -134,9 +134,9 @@ pub trait VehicleFilters: Send {
     /// Actuator `j`'s fault was cleared: the MIT-UKF's gamma and delta go back to the healthy
     /// point with their prior spread. The clearing says the effective output is healthy again
     /// at the operating point; in a still hover the data cannot move the fault's split of it
-    /// back (on the SITL quad's hover log, with its right profile, gamma stayed at 0.87 and
-    /// delta at +0.084 after the fault, bounds excluding 1), and what is known of the split is
-    /// what was known before the fault. The MIT-ESMF's set is left as it is.
+    /// back (gamma and delta stay traded along `γ u + δ`, bounds excluding the healthy point),
+    /// and what is known of the split is what was known before the fault. The MIT-ESMF's set
+    /// is left as it is.
     fn recovered(&mut self, j: usize);
     /// The kind of actuator `j`'s class in force (a loss a gain, a bias or a drift an offset,
     /// a stuck output; `None` for no fault or a class still open), before each step's
@@ -183,10 +183,10 @@ enum Following {
     Released(IdentifiedKind),
 }
 
-/// Seconds from a fault decision to the MIT-UKF's identification (see [`IdentifyParams`]). On
-/// the SITL helicopter's hover log, holds from 1 s and 2 s after the decision kept the split
-/// between gain and offset that the onset's transient gave, and cleared the fault 1.3-2.3 s
-/// later after it went away; from 3 s and 5 s the decisions were those without the hold.
+/// Seconds from a fault decision to the MIT-UKF's identification (see [`IdentifyParams`]): the
+/// change test's store must hold samples from after the onset's transient, whose split between
+/// gain and offset is the controller's reaction, not the fault's (the figures:
+/// docs/tuning-log.md).
 const IDENTIFY_AFTER_S: f64 = 3.0;
 
 /// Seconds from a release of the identification to a decision on another actuator within which
@@ -483,9 +483,8 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
             s.set_r,
         );
         // Unlike the paper bank, the rate entries adapt here too (within the projection box):
-        // on real vehicles they absorb unmodelled dynamics. Holding them at q0 (the default,
-        // see the MIT-ESMF module note) added a false tail decision before the onset and
-        // flagged the healthy swash servos on the TradHeli SITL logs (measured).
+        // on real vehicles they absorb unmodelled dynamics, which held at q0 (the default, see
+        // the MIT-ESMF module note) would be blamed on healthy actuators.
         f.fixed = s.fixed;
         f.esmf.box_centre = s.box_centre;
         f.esmf.box_half = s.box_half;
@@ -608,14 +607,12 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // in one step all wait. One followed until this change or the release before it (the
         // innovations see a change some steps before it is decided) was not what changed: it
         // goes back to its last fit, and its noise stays capped at q0 while the fault is in
-        // force. Released alone, the MIT rule raised it with the rest, and the filter put part
-        // of the new change into it (on the demo's stream, swash 2's gain was more than 0.05
-        // off on 52 % of the steps after the tail's decision; so kept, 0 %). Kept at a release
-        // already, it held the gain of a fault that had gone away (the SITL quad hover log
-        // cleared 1.6 s later).
+        // force: released alone, the MIT rule raised it with the rest, and the filter put part
+        // of the new change into it. Kept at any release, it would hold the gain of a fault
+        // that had gone away.
         if !self.decided_this_step {
-            // A release longer ago than this was not this change's (the demo's tail: its
-            // release came 0.4-1.4 s before its decision): it may be the followed fault's end.
+            // A release longer ago than this was not this change's (the innovations see a change
+            // at most about a second before it is decided): it may be the followed fault's end.
             let recent = (RELEASE_TO_DECISION_S / Model::dt(&self.setup.model)) as u64;
             for k in (0..l).filter(|&k| k != j) {
                 let kept = match self.following[k] {
@@ -655,10 +652,9 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         self.decided_this_step = false;
         // A release (a further change, the fault gone, or a gust) ends the following until the
         // data's fit agrees with the last one again (`hold_class`): the fit then spans the
-        // change too, and followed regardless, a reseat 3 s after the fault went away held the
-        // loss's gain for 13 s more on the SITL helicopter's hover log. Resumed once the fit
-        // agrees again, a gust's release does not leave the estimate off for the rest of the
-        // fault.
+        // change too, and followed regardless it would hold a loss's gain after the fault went
+        // away. Resumed once the fit agrees again, a gust's release does not leave the estimate
+        // off for the rest of the fault.
         let now = self.ukf.identifying();
         if in_force {
             self.steps += 1;
@@ -727,8 +723,8 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // The updates leave them at the identification (consider states; on every step while
         // followed: `set_fault_in_force`): the filter, taking the gusts for white noise, weighs
         // each sample as if it were independent of those the fit has already weighed with
-        // their colour, and moved the aileron's gain, reseated at 1, by up to 0.15 in the one
-        // step after a reseat (the figures are in docs/tuning-log.md).
+        // their colour, and would move a gain reseated at the fit by the gusts' whole colour in
+        // the step after a reseat (the figures are in docs/tuning-log.md).
         self.ukf.reseat_entries(&fit_entries(j, l, &c));
     }
     fn recovered(&mut self, j: usize) {

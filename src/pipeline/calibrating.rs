@@ -51,8 +51,9 @@ pub fn min_sample_rate_hz(kind: VehicleKind) -> f64 {
     1.0 / (MAX_PERIOD_PER_TIME_CONSTANT * command_time_constant_s(kind))
 }
 
-/// Rate spread (standard deviation, rad/s) above which a calibration stretch manoeuvred: a
-/// steady SITL hover spreads 0.0014, the SITL manoeuvres 0.14-0.26.
+/// Rate spread (standard deviation, rad/s) above which a calibration stretch manoeuvred: about
+/// 3° of rate a second, several times a still hover's gust response and a few times less than
+/// a manoeuvre's (the figures: docs/tuning-log.md).
 const MOVED_RATE_STD: f64 = 0.05;
 
 /// The standard deviation of one rate axis over a calibration stretch.
@@ -206,10 +207,10 @@ impl VehiclePipeline {
             profile.model.measure_az = false;
         }
         // An identified model predicts the rates only: a static a_z row cannot follow a
-        // helicopter's vertical manoeuvres (R² below 0.2 on the TradHeli SITL even with the
-        // vertical speed) and its errors, slow and correlated with the manoeuvre, pulled the
-        // swash servos' estimates off by up to 0.5 (measured). Isolation works in the observable
-        // space instead, where what rates cannot see is never blamed on one actuator.
+        // helicopter's vertical manoeuvres (the collective's response lags with the rotor), and
+        // its errors, slow and correlated with the manoeuvre, would pull the swash servos'
+        // estimates. Isolation works in the observable space instead, where what rates cannot
+        // see is never blamed on one actuator.
         if profile.model.dynamics == Dynamics::Arx && profile.model.measure_az {
             profile.model.measure_az = false;
         }
@@ -301,9 +302,8 @@ impl VehiclePipeline {
             match calibrate_arx(&shifted, dt, max_delay, &base) {
                 Ok(f) => Some(f),
                 // On a stretch with many holes (over one interval in twenty) the scaled
-                // geometry, fitted on the same holes, is no fallback (TradHeli SITL logs with
-                // one ATTITUDE in five lost, or one in five at random: roll x0.17, R² -2.1, and
-                // up to 25 false decisions before the onset). The next stretch may do better.
+                // geometry, fitted on the same holes, is no fallback: it fits the holes' steps
+                // too. The next stretch may do better.
                 Err(e) if gaps * 20 > samples.len() as u64 => {
                     let why = match holes_note(&e) {
                         note if !note.is_empty() => format!("the identified model needs {e}{note}"),

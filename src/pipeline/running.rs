@@ -136,9 +136,8 @@ impl VehiclePipeline {
                 // The first lost period's is the last one measured; the rest, and the
                 // two periods that end at this sample and the next, are unknown: each
                 // takes the mean increment over the hole, so that together they add
-                // up to the measured change. (Before: zero over the hole, then the
-                // whole change as one period's increment; on 480 lossy replays of
-                // the two TradHeli SITL logs, 136 had a false decision, now 81.)
+                // up to the measured change (the whole change as one period's
+                // increment would read as a jump the actuators made).
                 let last = r.rates_prev[1];
                 let mean: [f64; 3] =
                     std::array::from_fn(|i| (s.rates[i] - last[i]) / (lost + 1) as f64);
