@@ -285,6 +285,17 @@ pub struct RunArgs {
     /// after take-off).
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     pub calibrate_until: Option<f64>,
+    /// Length of the healthy calibration stretch (s of flight from 3 s after take-off). A
+    /// shorter one starts the monitoring sooner (a flight too short for the default never
+    /// calibrates) but fits the model more loosely: under 10 s is warned about.
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 20.0,
+        allow_negative_numbers = true,
+        conflicts_with = "calibrate_until"
+    )]
+    pub calibrate_s: f64,
 }
 
 /// The JSON-lines files of a run (`replay`, `monitor`, `demo`, `sim`, `eval`).

@@ -248,21 +248,30 @@ fn heli_hover_servo1_gain_fault() {
     // (SOURCE.md), u = 0.716 ± 0.05, so the effective output deviation at the operating point
     // is -(0.3 u + 0.3) = -0.515 ± 0.015. Rates alone cannot split a swash servo's deviation
     // from the collective, so the deviation judged is the one the measurements attribute to
-    // swash1 (both filters), from 5 s after the onset until the removal, within 20 µs.
+    // swash1 (both filters), from 5 s after the onset until the removal: within 20 µs on 99 %
+    // of the steps, and on every step within 20 µs plus the truth's own spread over the
+    // operating point (±0.015: the reference is its mean, not each step's command).
     let truth_dev = -(0.3 * 0.716 + 0.3);
     let tolerance = 20.0 / 500.0;
-    let mut n = 0;
+    let (mut n, mut within) = (0, [0usize; 2]);
     for (t, est) in c.all.iter().filter(|(t, _)| *t >= on + 5.0 && *t < off) {
         for (f, e) in est.iter().enumerate() {
             let dev = e[0].deviation;
             assert!(
-                (dev - truth_dev).abs() <= tolerance,
+                (dev - truth_dev).abs() <= tolerance + 0.015,
                 "filter {f} at t={t:.2}: deviation {dev:.3}"
             );
+            within[f] += usize::from((dev - truth_dev).abs() <= tolerance);
         }
         n += 1;
     }
     assert!(n > 500, "{n} steps in the window");
+    for (f, w) in within.iter().enumerate() {
+        assert!(
+            *w * 100 >= n * 99,
+            "filter {f}: {w} of {n} steps within 20 µs"
+        );
+    }
     // The truth (0.7, -0.3) inside both filters' bounds once the MIT-UKF has settled (10 s
     // after the onset; the split into gain and bias needs the command's transient to fade).
     for (t, est) in c.all.iter().filter(|(t, _)| *t >= on + 10.0 && *t < off) {

@@ -108,7 +108,7 @@ pub fn run(a: BenchmarkArgs) -> anyhow::Result<()> {
             progress.show(&format!("benchmark: [{done}/{n}] {}", c.file));
             let profile = c.profile.as_deref().map(Profile::resolve).transpose()?;
             cases.push(rayon::scope(|_| {
-                replay_case(&a.data.join(&c.file), c, profile)
+                replay_case(&a.data.join(&c.file), c, profile, truth.calibrate_s)
             }));
         }
         let scores: Vec<CaseScore> = cases.iter().map(|c| c.score.clone()).collect();
@@ -145,10 +145,13 @@ fn replay_case(
     path: &Path,
     case: &ahcmon::eval::datasets::Case,
     profile: Option<Profile>,
+    calibrate_s: Option<f64>,
 ) -> CaseRun {
+    let defaults = PipelineConfig::default();
     let mut monitor = Monitor::new(PipelineConfig {
         profile,
-        ..PipelineConfig::default()
+        calibrate_s: calibrate_s.unwrap_or(defaults.calibrate_s),
+        ..defaults
     });
     let mut sink = Collect::default();
     let started = std::time::Instant::now();

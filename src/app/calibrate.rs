@@ -38,6 +38,7 @@ fn calibrate(
         profile: profile.map(str::to_string),
         output: Default::default(),
         calibrate_until: Some(until),
+        calibrate_s: ahcmon::pipeline::PipelineConfig::default().calibrate_s,
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
     // Echoed: the pipeline's progress and warnings (a short stretch, a poor fit, a profile of

@@ -58,9 +58,17 @@ impl RunArgs {
             ))
             .into());
         }
+        if !(self.calibrate_s.is_finite() && (1.0..=3600.0).contains(&self.calibrate_s)) {
+            return Err(UsageError(format!(
+                "--calibrate-s {}: must be between 1 and 3600 s",
+                self.calibrate_s
+            ))
+            .into());
+        }
         Ok(PipelineConfig {
             profile,
             calibrate_until: self.calibrate_until,
+            calibrate_s: self.calibrate_s,
             ..PipelineConfig::default()
         })
     }

@@ -70,6 +70,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         profile: None,
         output,
         calibrate_until: None,
+        calibrate_s: ahcmon::pipeline::PipelineConfig::default().calibrate_s,
     };
     // Headless, the monitor stops once the simulated flight has ended; with the
     // dashboard the operator looks on until q.

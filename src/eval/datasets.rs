@@ -28,6 +28,10 @@ pub struct DatasetTruth {
     pub description: String,
     #[serde(default)]
     pub published: Option<Published>,
+    /// The calibration stretch's length (s) for this dataset's flights, as `--calibrate-s`
+    /// (default 20 s): for flights too short for the default, stated with the reason.
+    #[serde(default)]
+    pub calibrate_s: Option<f64>,
     #[serde(rename = "case")]
     pub cases: Vec<Case>,
 }
@@ -86,6 +90,14 @@ impl DatasetTruth {
             path: path.to_string(),
             message: e.to_string(),
         })?;
+        if let Some(t) = truth.calibrate_s
+            && !(t.is_finite() && (1.0..=3600.0).contains(&t))
+        {
+            return Err(TruthError::Parse {
+                path: path.to_string(),
+                message: format!("calibrate_s = {t}: must be between 1 and 3600 s"),
+            });
+        }
         for c in &truth.cases {
             let invalid = |message: &str| TruthError::Invalid {
                 path: path.to_string(),

@@ -119,7 +119,12 @@ fn kind_name(kind: VehicleKind) -> &'static str {
 impl VehiclePipeline {
     /// A sample of the healthy stretch: stored until the stretch is complete.
     pub(super) fn calibrating(&mut self, s: &TelemetrySample, sink: &mut dyn Sink) {
-        let Stage::Calibrating { profile, samples } = &mut self.stage else {
+        let Stage::Calibrating {
+            profile,
+            samples,
+            raw,
+        } = &mut self.stage
+        else {
             return;
         };
         let warned = &mut self.warned_missing_output;
@@ -133,6 +138,7 @@ impl VehiclePipeline {
             u,
             az: s.az,
         });
+        raw.push(*s);
         let start = samples[0].t;
         if let Some(until) = self.cfg.calibrate_until
             && until <= start
@@ -152,7 +158,9 @@ impl VehiclePipeline {
         if done {
             let profile = (**profile).clone();
             let samples = std::mem::take(samples);
+            self.stretch = std::mem::take(raw);
             self.start_running(profile, &samples, sink);
+            self.stretch = Vec::new();
         }
     }
 
@@ -495,6 +503,7 @@ impl VehiclePipeline {
             let stage = Stage::Calibrating {
                 profile: Box::new(profile),
                 samples: samples.to_vec(),
+                raw: std::mem::take(&mut self.stretch),
             };
             self.set_stage(stage, "the identified model is for another rate");
             return;

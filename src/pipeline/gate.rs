@@ -198,6 +198,7 @@ impl VehiclePipeline {
                 let stage = Stage::Calibrating {
                     profile: Box::new(d.profile.clone()),
                     samples: Vec::with_capacity(2048),
+                    raw: Vec::with_capacity(2048),
                 };
                 self.set_stage(
                     stage,

@@ -67,6 +67,8 @@ enum Stage {
     Calibrating {
         profile: Box<Profile>,
         samples: Vec<StoredSample>,
+        /// The same samples as received: the filters run over them once the model is fitted.
+        raw: Vec<TelemetrySample>,
     },
     Running(Box<Running>),
     /// The profile could not be chosen or the filters not built; said once.
@@ -143,6 +145,9 @@ pub struct VehiclePipeline {
     announced_takeoff: Option<f64>,
     /// Why the run failed (said when it happened; repeated in the summary).
     failure: Option<String>,
+    /// The calibration stretch as received, while its model is fitted: the filters start by
+    /// running over it (`running::catch_up`).
+    stretch: Vec<TelemetrySample>,
     /// What the monitor knew when the vehicle last rebooted (for the summary: `last` and
     /// the faults then in force belong to the boot before).
     pub before_reboot: Option<BeforeReboot>,
@@ -179,6 +184,7 @@ impl VehiclePipeline {
             unsupported: false,
             announced_takeoff: None,
             failure: None,
+            stretch: Vec::new(),
             before_reboot: None,
         }
     }
@@ -196,7 +202,9 @@ impl VehiclePipeline {
     /// (`None` for the target when it ends at `--calibrate-until`).
     pub fn calibration_progress(&self) -> Option<(f64, Option<f64>)> {
         match &self.stage {
-            Stage::Calibrating { samples, profile } => {
+            Stage::Calibrating {
+                samples, profile, ..
+            } => {
                 let done = match (samples.first(), samples.last()) {
                     (Some(a), Some(b)) => b.t - a.t,
                     _ => 0.0,
@@ -236,7 +244,10 @@ impl VehiclePipeline {
             ));
         }
         // Still calibrating when the data ended.
-        if let Stage::Calibrating { samples, profile } = &self.stage {
+        if let Stage::Calibrating {
+            samples, profile, ..
+        } = &self.stage
+        {
             let (first, last) = (samples.first()?.t, samples.last()?.t);
             return Some(match self.cfg.calibrate_until {
                 Some(until) => format!(
@@ -247,7 +258,7 @@ impl VehiclePipeline {
                     last - first
                 ),
                 None => format!(
-                    "the data end {:.1} s into the {} s calibration stretch",
+                    "the data end {:.1} s into the {} s calibration stretch (a shorter one: --calibrate-s)",
                     last - first,
                     self.cfg.calibrate_s
                 ),
@@ -268,9 +279,17 @@ impl VehiclePipeline {
                     g.longest_airborne_s()
                 )
             } else if g.longest_airborne_s() > 0.0 {
+                let air = g.longest_airborne_s();
+                let shorter = if air < self.cfg.settle_s + self.cfg.calibrate_s {
+                    format!(
+                        "; a flight this short needs a shorter stretch than {} s: --calibrate-s",
+                        self.cfg.calibrate_s
+                    )
+                } else {
+                    String::new()
+                };
                 format!(
-                    "airborne for at most {:.1} s, and no calibration completed (it starts {} s after take-off; a landing, a reboot or a failed fit, said above, start it over)",
-                    g.longest_airborne_s(),
+                    "airborne for at most {air:.1} s, and no calibration completed (it starts {} s after take-off; a landing, a reboot or a failed fit, said above, start it over){shorter}",
                     self.cfg.settle_s
                 )
             } else if !heartbeat {

@@ -6,6 +6,7 @@
 use super::calibrating::StoredSample;
 use super::step::{Core, StepInput};
 use super::{Stage, VehiclePipeline};
+use crate::diagnose::decision::Decision;
 use crate::diagnose::vehicle::Diagnoser;
 use crate::estimate::vehicle::build;
 use crate::model::MAX_ACTUATORS;
@@ -206,8 +207,9 @@ impl VehiclePipeline {
         }
     }
 
-    /// Build the filters and the diagnosis on `calibrated` and start estimating, seeded with
-    /// the end of the stored stretch.
+    /// Build the filters and the diagnosis on `calibrated` and start estimating: first over the
+    /// calibration stretch the model was fitted on, as far as it was kept (`catch_up`), else
+    /// seeded with the stretch's end.
     pub(super) fn run_with(
         &mut self,
         calibrated: Profile,
@@ -216,20 +218,88 @@ impl VehiclePipeline {
         dt: f64,
         sink: &mut dyn Sink,
     ) {
-        let l = calibrated.actuators.len();
+        let stretch = std::mem::take(&mut self.stretch);
         self.unsupported = false;
-        let filters = match build(&calibrated, dt) {
+        self.fit = fit;
+        if !self.start_stage(&calibrated, samples, dt, sink) {
+            return;
+        }
+        if stretch.len() > 1 && !self.catch_up(&stretch, sink) {
+            self.start_stage(&calibrated, samples, dt, sink);
+        }
+    }
+
+    /// The filters and the diagnosis on the stretch they were fitted on, its decisions held back:
+    /// they then start estimating at its end with what it taught them (the residuals' colour,
+    /// the change test's store, the adapted noise, the bounds' persistence) instead of cold, so
+    /// that a fault soon after the stretch is judged as one later is (a short flight's fault
+    /// came before the diagnosis had learned anything). The stretch is healthy by the
+    /// calibration's premise: when the diagnosis decides a fault or a suspect on it, its own
+    /// model does not explain it, that is said, and the filters start cold at its end instead
+    /// (false). Statements (low excitation, suspect: `Event::is_statement`) are passed on with
+    /// their times; the counters stay those of the samples after the stretch.
+    fn catch_up(&mut self, stretch: &[TelemetrySample], sink: &mut dyn Sink) -> bool {
+        #[derive(Default)]
+        struct Held(Vec<Decision>);
+        impl Sink for Held {
+            fn decision(&mut self, d: &Decision) {
+                self.0.push(d.clone());
+            }
+        }
+        let counters = self.counters;
+        if let Stage::Running(r) = &mut self.stage {
+            r.prev_u = None;
+        }
+        let mut held = Held::default();
+        for s in stretch {
+            self.running(s, &mut held);
+        }
+        self.counters = counters;
+        let judged: Vec<&Decision> = held.0.iter().filter(|d| !d.event.is_statement()).collect();
+        if let Some(first) = judged.first() {
+            sink.message(
+                self.sysid,
+                &format!(
+                    "warning: run over their own calibration stretch, the filters made {} decisions on it, the first {} on {} at t={:.2} s: the model explains the stretch loosely; estimating from its end without it",
+                    judged.len(),
+                    first.event.as_str(),
+                    first.actuator.as_deref().unwrap_or("the vehicle"),
+                    first.t
+                ),
+            );
+            self.active = [None; MAX_ACTUATORS];
+            self.suspect = [false; MAX_ACTUATORS];
+            self.last = None;
+            return false;
+        }
+        for d in &held.0 {
+            self.counters.decisions += 1;
+            sink.decision(d);
+        }
+        true
+    }
+
+    /// The estimating stage on `calibrated`, seeded with the end of the stored stretch: false
+    /// (said) when the filters cannot be built.
+    fn start_stage(
+        &mut self,
+        calibrated: &Profile,
+        samples: &[StoredSample],
+        dt: f64,
+        sink: &mut dyn Sink,
+    ) -> bool {
+        let l = calibrated.actuators.len();
+        let filters = match build(calibrated, dt) {
             Ok(f) => f,
             Err(e) => {
                 self.fail(e.to_string(), sink);
-                return;
+                return false;
             }
         };
         let m = filters.measurements();
         let exogenous = filters.inputs() > l;
         let delay = calibrated.model.arx.as_ref().map_or(0, |a| a.delay);
-        let diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, &calibrated, dt);
-        self.fit = fit;
+        let diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, calibrated, dt);
         let last = samples.last().map(|s| (s.t, s.u));
         // Seed the command history and the last rates with the end of the healthy stretch.
         let mut u_history = [[0.0; MAX_ACTUATORS]; U_HISTORY];
@@ -250,7 +320,7 @@ impl VehiclePipeline {
             dt * 1e3
         );
         let stage = Stage::Running(Box::new(Running {
-            core: Core::new(calibrated, filters, diag, self.sysid),
+            core: Core::new(calibrated.clone(), filters, diag, self.sysid),
             dt,
             l,
             m,
@@ -264,5 +334,6 @@ impl VehiclePipeline {
             last_t: last.map_or(0.0, |l| l.0),
         }));
         self.set_stage(stage, &why);
+        true
     }
 }
