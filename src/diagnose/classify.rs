@@ -135,9 +135,10 @@ impl Diagnoser {
 
     /// C2: the class from the MIT-UKF's estimate and its bounds, and whether it is only the
     /// mixed fallback. A kind is told when its coefficient is beyond its tolerance with bounds
-    /// excluding the healthy value, and the other's bounds reach within its tolerance; any
-    /// other change (both beyond, or a gain above 1) is mixed: a loss only if one could make it (the output moved toward zero by no
-    /// more than the command), else a bias. `None` while the bounds tell nothing. Never stuck:
+    /// excluding the healthy value, and the other is not (its bounds reach within its
+    /// tolerance); any other change (both beyond, or a gain above 1) is mixed: a loss only if
+    /// one could make it (the output moved toward zero by no more than the command), else a
+    /// bias. `None` while the bounds tell nothing. Never stuck:
     /// the filters have no stuck state, and a gain swinging through zero while it converges
     /// looks like one; only the data tell a stuck output (C1).
     pub(super) fn filter_class(&self, j: usize) -> Option<(FaultClass, bool)> {
@@ -148,10 +149,10 @@ impl Diagnoser {
         let bias_off = e.delta.abs() > p.bias_tau && (e.delta_lo > 0.0 || e.delta_hi < 0.0);
         let gain_held = e.gamma_lo <= 1.0 + p.loe_tau && 1.0 - p.loe_tau <= e.gamma_hi;
         let bias_held = e.delta_lo <= p.bias_tau && -p.bias_tau <= e.delta_hi;
-        if gain_off && e.gamma < 1.0 && bias_held {
+        if gain_off && !bias_off && e.gamma < 1.0 && bias_held {
             return Some((FaultClass::LossOfEffectiveness, false));
         }
-        if bias_off && gain_held {
+        if bias_off && !gain_off && gain_held {
             return Some((FaultClass::Bias, false));
         }
         if !(gain_off || bias_off) {
