@@ -57,11 +57,7 @@ fn fly_quad_for(
 ) -> (VehiclePipeline, Messages, u64) {
     let profile = Profile::resolve("quad-x").unwrap();
     let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 3)).unwrap();
-    let cfg = PipelineConfig {
-        profile: Some(profile.clone()),
-        ..PipelineConfig::default()
-    };
-    let mut pipeline = VehiclePipeline::new(1, cfg);
+    let mut pipeline = pipeline_with(&profile);
     let mut sink = Messages::default();
     let info = VehicleInfo::default();
     let mut lost_in_stretch = 0;
@@ -404,6 +400,17 @@ impl Sink for Decisions {
     }
 }
 
+/// A pipeline for system 1 with `profile` given (no detection from the heartbeat).
+fn pipeline_with(profile: &Profile) -> VehiclePipeline {
+    VehiclePipeline::new(
+        1,
+        PipelineConfig {
+            profile: Some(profile.clone()),
+            ..PipelineConfig::default()
+        },
+    )
+}
+
 /// The simulated quad in gusts, through the pipeline for `steps` samples with `faults`.
 fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decisions {
     let profile = Profile::resolve("quad-x").unwrap();
@@ -416,11 +423,7 @@ fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decis
     });
     cfg.faults = faults;
     let mut sim = VehicleSim::new(cfg).unwrap();
-    let cfg = PipelineConfig {
-        profile: Some(profile.clone()),
-        ..PipelineConfig::default()
-    };
-    let mut pipeline = VehiclePipeline::new(1, cfg);
+    let mut pipeline = pipeline_with(&profile);
     let mut sink = Decisions::default();
     let info = VehicleInfo::default();
     for _ in 0..steps {
@@ -443,6 +446,20 @@ fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decis
     sink
 }
 
+/// Motor 2's gain at 0.5 from `t` to the end.
+fn motor2_loss_from(t: f64) -> crate::sim::fault::Fault {
+    crate::sim::fault::Fault {
+        actuator: "motor2".into(),
+        t,
+        until: None,
+        gamma: Some(0.5),
+        delta: None,
+        sine: None,
+        ramp: None,
+        stuck: None,
+    }
+}
+
 /// The filters and the diagnosis start warm at the end of the calibration stretch: a loss
 /// 0.3 s after it (the stretch ends at 23 s: 3 s settle, 20 s) is decided on its motor within
 /// a second, as one later in the flight is. Started cold there, the diagnosis has learned
@@ -450,16 +467,7 @@ fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decis
 #[test]
 fn a_fault_just_after_the_calibration_is_decided_at_once() {
     let onset = 23.3;
-    let loss = crate::sim::fault::Fault {
-        actuator: "motor2".into(),
-        t: onset,
-        until: None,
-        gamma: Some(0.5),
-        delta: None,
-        sine: None,
-        ramp: None,
-        stuck: None,
-    };
+    let loss = motor2_loss_from(onset);
     let sink = fly_quad_faults(1300, vec![loss]);
     let first = sink.0.iter().find(|d| d.event == Event::Fault);
     let first = first.unwrap_or_else(|| panic!("no fault: {:?}", sink.1));
@@ -480,16 +488,7 @@ fn a_fault_just_after_the_calibration_is_decided_at_once() {
 /// filters start cold at its end, with no decision of the stretch passed on.
 #[test]
 fn a_stretch_its_own_model_does_not_explain_starts_the_filters_cold() {
-    let loss = crate::sim::fault::Fault {
-        actuator: "motor2".into(),
-        t: 13.0,
-        until: None,
-        gamma: Some(0.5),
-        delta: None,
-        sine: None,
-        ramp: None,
-        stuck: None,
-    };
+    let loss = motor2_loss_from(13.0);
     let sink = fly_quad_faults(1200, vec![loss]);
     let said = sink
         .1
