@@ -253,19 +253,8 @@ fn c2_c3_the_filters_class_needs_bounds_that_tell_and_a_command_that_moves() {
     // Both beyond their tolerances (gain 0.75 within [0.63, 0.87], offset -0.06 excluding
     // 0): not a bias because the gain's bounds still reach 0.85, but mixed, and the output
     // moved toward zero by less than the command, so a loss.
-    let first_mixed = |amp: f64| {
-        let mut f = Flight::new("plane");
-        let e = move |t: f64| {
-            let mut e = vec![healthy(0.02); 3];
-            if t >= 8.0 {
-                e[1] = estimate(0.75, 0.12, -0.06, 0.009);
-            }
-            e
-        };
-        f.fly(0.0, 16.0, dithered(3, 0.3, amp), e, None);
-        f.events(Event::Fault).first().and_then(|d| d.class)
-    };
-    assert_eq!(first_mixed(0.08), Some(FaultClass::LossOfEffectiveness));
+    let (c, _) = first_class(estimate(0.75, 0.12, -0.06, 0.009), 0.08).unwrap();
+    assert_eq!(c, Some(FaultClass::LossOfEffectiveness));
     // The same offset with a gain whose bounds span 0.4 to 1.6: the bounds tell nothing.
     let (c, why) = first_class(estimate(1.0, 0.6, 0.2, 0.02), 0.08).unwrap();
     assert_eq!(c, Some(FaultClass::Unclassified), "{why}");
