@@ -255,7 +255,7 @@ fn c2_c3_the_filters_class_needs_bounds_that_tell_and_a_command_that_moves() {
     // moved toward zero by less than the command, so a loss.
     let (c, _) = first_class(estimate(0.75, 0.12, -0.06, 0.009), 0.08).unwrap();
     assert_eq!(c, Some(FaultClass::LossOfEffectiveness));
-    // The same offset with a gain whose bounds span 0.4 to 1.6: the bounds tell nothing.
+    // The offset of +0.2 with a gain whose bounds span 0.4 to 1.6: the bounds tell nothing.
     let (c, why) = first_class(estimate(1.0, 0.6, 0.2, 0.02), 0.08).unwrap();
     assert_eq!(c, Some(FaultClass::Unclassified), "{why}");
     assert!(why.contains("C3"), "{why}");
