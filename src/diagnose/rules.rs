@@ -249,7 +249,20 @@ impl Diagnoser {
                 next = prev;
             }
         } else {
-            self.actuators[j].class_candidate = None;
+            let st = &mut self.actuators[j];
+            st.class_candidate = None;
+            // The class in force read again, on current evidence, by a stronger rule: it is
+            // that rule's from now on (the data's class outranks the filters', a told kind the
+            // mixed fallback), so what follows the class (the filters' identification) follows
+            // the stronger reading.
+            if class == prev && current && !ukf_warming {
+                if rule == Rule::C1 && !st.class_from_data {
+                    st.class_from_data = true;
+                    st.class_mixed = false;
+                } else if rule == Rule::C2 && !mixed {
+                    st.class_mixed = false;
+                }
+            }
         }
         let union = self.actuators[j].decided_filters | alarms;
         if next != prev || union != self.actuators[j].decided_filters {

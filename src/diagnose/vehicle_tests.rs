@@ -337,6 +337,35 @@ fn k1_a_class_changes_only_once_held_and_while_the_fault_shows() {
 }
 
 #[test]
+fn k1_a_class_the_data_read_again_is_theirs_and_their_fit_is_followed() {
+    // Plane aileron, an offset of +0.2 from 8 s in the data; the MIT-UKF reads it as a gain of
+    // 1.3 instead (the trade along γ u + δ), so the fault is decided on the filters' mixed
+    // fallback, a bias, before the data have the second they need for a class. Once they
+    // read the same bias clearly, the class is theirs, and the filters follow their fit.
+    let mut f = Flight::new("plane");
+    let est = |t: f64| {
+        let mut e = vec![healthy(0.02); 3];
+        if t >= 8.0 {
+            e[0] = estimate(1.3, 0.05, 0.0, 0.02);
+        }
+        e
+    };
+    let change = |t: f64, _: &[f64]| (0usize, if t >= 8.0 { 0.2 } else { 0.0 });
+    f.fly(0.0, 12.0, dithered(3, 0.5, 0.08), est, Some(&change));
+    let faults = f.events(Event::Fault);
+    assert_eq!(faults.len(), 1, "{:?}", f.decisions);
+    assert_eq!(faults[0].class, Some(FaultClass::Bias));
+    assert!(faults[0].t < 9.0, "{:?}", faults[0]);
+    let detail = faults[0].detail.clone().unwrap_or_default();
+    assert!(detail.contains("(C2)"), "{detail}");
+    assert!(f.events(Event::Changed).is_empty(), "{:?}", f.decisions);
+    let id = f.d.identified(0).expect("the data's bias is followed");
+    assert_eq!(id.kind, IdentifiedKind::Offset);
+    assert!((id.delta - 0.2).abs() < 0.02, "{id:?}");
+    assert_eq!(id.gamma, 1.0);
+}
+
+#[test]
 fn every_decision_says_its_rule() {
     let f = hexa_motor5_stuck(true);
     assert!(!f.decisions.is_empty());

@@ -10,7 +10,7 @@
 //! caller runs the cases (in parallel) and prints.
 
 use super::EvalError;
-use super::oracle::{DETECTABLE_LAMBDA, Oracle, OracleNoise};
+use super::oracle::{Alternative, DETECTABLE_LAMBDA, KindOracle, Oracle, OracleNoise};
 use super::vehicle::sim_config;
 use crate::diagnose::vehicle::{Decision, Event};
 use crate::estimate::vehicle::AhcEstimate;
@@ -85,6 +85,16 @@ impl FaultKind {
             "stuck" => self == Self::StuckNearTrim,
             "drift" => self == Self::RampTo060 && t_sim < ONSET_S + RAMP_S,
             _ => false,
+        }
+    }
+
+    /// The kinds of change a classifier must tell this fault from: a loss (or a gain ramp)
+    /// from an offset, an offset from a gain change, a stuck output from either.
+    fn alternatives(self) -> &'static [Alternative] {
+        match self {
+            Self::Loss050 | Self::Loss075 | Self::RampTo060 => &[Alternative::Offset],
+            Self::BiasUp | Self::BiasDown => &[Alternative::Gain],
+            Self::StuckNearTrim => &[Alternative::Gain, Alternative::Offset],
         }
     }
 
@@ -269,6 +279,10 @@ pub struct CaseResult {
     /// The class in force on the faulty actuator `JUDGE_AFTER_S` after its decision.
     pub class: Option<String>,
     pub class_right: Option<bool>,
+    /// The class oracle's non-centrality ([`KindOracle`], the fault against the closest
+    /// alternative of another kind) at the same time, and whether that separates the class.
+    pub class_lambda: Option<f64>,
+    pub class_separable: Option<bool>,
     /// MIT-UKF gamma and delta minus the truth `JUDGE_AFTER_S` after the decision.
     pub gamma_error: Option<f64>,
     pub delta_error: Option<f64>,
@@ -349,22 +363,21 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
         vertical: 0.0,
         tau_s: 1.0,
     });
-    let mut oracle = Oracle::new(
-        truth,
-        OracleNoise {
-            dt: cfg.dt,
-            gust_tau_s: gusts.tau_s,
-            gust_sd: [
-                gusts.angular[0],
-                gusts.angular[1],
-                gusts.angular[2],
-                gusts.vertical,
-            ],
-            gyro_sd: cfg.gyro_noise,
-            az_sd: vehicle.model.measure_az.then_some(cfg.az_noise),
-        },
-    );
+    let noise = OracleNoise {
+        dt: cfg.dt,
+        gust_tau_s: gusts.tau_s,
+        gust_sd: [
+            gusts.angular[0],
+            gusts.angular[1],
+            gusts.angular[2],
+            gusts.vertical,
+        ],
+        gyro_sd: cfg.gyro_noise,
+        az_sd: vehicle.model.measure_az.then_some(cfg.az_noise),
+    };
+    let mut oracle = Oracle::new(truth.clone(), noise);
     let l = vehicle.actuators.len();
+    let mut kind_oracle = target.map(|j| KindOracle::new(truth.clone(), noise, j, l));
     let mut sim = VehicleSim::new(cfg).map_err(err)?;
     let mut enc = SimTelemetry::new(&vehicle);
     let mut monitor = Monitor::new(PipelineConfig::default());
@@ -381,6 +394,7 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
     let mut deviation = [0.0; crate::model::MAX_ACTUATORS];
     let mut prev = sim.step();
     let mut truth_at: Vec<(f64, f64, f64)> = vec![];
+    let mut class_lambda_at: Vec<f64> = vec![];
     for _ in 1..named.scenario.steps() {
         let next = sim.step();
         for (j, dev) in deviation.iter_mut().enumerate().take(l) {
@@ -390,8 +404,13 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
         if lambda_at_mark.is_none() && prev.t >= ONSET_S + NAME_WITHIN_S {
             lambda_at_mark = Some(oracle.lambda());
         }
-        if let Some(j) = target {
+        if let (Some(j), Some(k), Some((_, kind))) = (target, kind_oracle.as_mut(), &case.fault) {
             truth_at.push((prev.t + BOOT_OFFSET_S, prev.gamma[j], prev.delta[j]));
+            k.step(deviation[j], prev.u[j], prev.t >= ONSET_S);
+            let sep = (kind.alternatives().iter())
+                .map(|&a| k.lambda_from(a))
+                .fold(f64::INFINITY, f64::min);
+            class_lambda_at.push(sep);
         }
         msgs.clear();
         enc.sample_messages(&prev, &next.u[..l], &mut msgs);
@@ -416,6 +435,7 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
         lambda_at_mark,
         &sink,
         &truth_at,
+        &class_lambda_at,
     ))
 }
 
@@ -425,6 +445,7 @@ fn score(
     lambda: Option<f64>,
     sink: &Collect,
     truth_at: &[(f64, f64, f64)],
+    class_lambda_at: &[f64],
 ) -> CaseResult {
     let onset = ONSET_S + BOOT_OFFSET_S;
     let target = case.fault.as_ref().map(|(a, _)| a.as_str());
@@ -474,10 +495,12 @@ fn score(
         }
     }
     let class = class.map(|c| c.as_str().to_string());
-    let judged = on_target.and_then(|d| {
+    let judged_at = on_target.and_then(|d| {
         let at = d.t + JUDGE_AFTER_S;
-        truth_at.iter().find(|(t, _, _)| *t >= at - 1e-9)
+        truth_at.iter().position(|(t, _, _)| *t >= at - 1e-9)
     });
+    let judged = judged_at.map(|i| &truth_at[i]);
+    let class_lambda = judged_at.and_then(|i| class_lambda_at.get(i).copied());
     let class_right = match (&case.fault, judged) {
         (Some((_, kind)), Some(&(t, g, dl))) => {
             let t_sim = t - BOOT_OFFSET_S;
@@ -503,6 +526,8 @@ fn score(
         wrong_actuator,
         class,
         class_right,
+        class_lambda,
+        class_separable: class_lambda.map(|l| l >= DETECTABLE_LAMBDA),
         gamma_error,
         delta_error,
         cannot_estimate: (sink.decisions.iter()).any(|d| d.event == Event::CannotEstimate),
@@ -565,13 +590,14 @@ mod tests {
             decision(onset + 7.0, Event::Changed, "motor2", Some("bias")),
         ]);
         let truth = [(onset + 5.5, 0.5, 0.0)];
-        let r = score(&case, true, Some(100.0), &sink, &truth);
+        let r = score(&case, true, Some(100.0), &sink, &truth, &[100.0]);
         assert_eq!(r.false_before_onset, 1);
         assert_eq!(r.first, Some(("motor2".into(), 0.5)));
         assert_eq!(r.named_after_s, Some(0.5));
         assert_eq!(r.wrong_actuator, 1);
         assert_eq!(r.class.as_deref(), Some("loss_of_effectiveness"));
         assert_eq!(r.class_right, Some(true));
+        assert_eq!(r.class_separable, Some(true));
         assert!((r.gamma_error.unwrap() - 0.05).abs() < 1e-12);
         assert_eq!(r.detectable, Some(true));
         let rows = report(std::slice::from_ref(&r));
@@ -582,8 +608,31 @@ mod tests {
             (1, 1, 1)
         );
         assert_eq!(all.estimate_right, 1);
+        assert_eq!((all.class_separable, all.class_right_separable), (1, 1));
+        // A class the oracle cannot separate is right still, but not among the separable.
+        let r = score(
+            &case,
+            true,
+            Some(100.0),
+            &sink,
+            &truth,
+            &[DETECTABLE_LAMBDA * 0.9],
+        );
+        assert_eq!(r.class_separable, Some(false));
+        let rows = report(&[r]);
+        let all = rows.iter().find(|x| x.vehicle == "all" && x.kind == "all");
+        let all = all.unwrap();
+        assert_eq!(all.class_right, 1);
+        assert_eq!((all.class_separable, all.class_right_separable), (0, 0));
         // Below the oracle's level the same run counts as an undetectable wrong decision.
-        let r = score(&case, true, Some(DETECTABLE_LAMBDA * 0.9), &sink, &truth);
+        let r = score(
+            &case,
+            true,
+            Some(DETECTABLE_LAMBDA * 0.9),
+            &sink,
+            &truth,
+            &[100.0],
+        );
         let rows = report(&[r]);
         let all = rows.iter().find(|x| x.vehicle == "all" && x.kind == "all");
         assert_eq!(

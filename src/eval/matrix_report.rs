@@ -19,6 +19,10 @@ pub struct ReportRow {
     /// Of the named-right cases: the class right, and gamma and delta both within 0.1.
     pub class_right: usize,
     pub estimate_right: usize,
+    /// Of the named-right cases: those whose class the class oracle separates from the other
+    /// kinds at the judging time, and of them the class right.
+    pub class_separable: usize,
+    pub class_right_separable: usize,
     /// Not-detectable cases with a fault decision on another actuator.
     pub undetectable_wrong: usize,
     /// Fault decisions before the onsets of fault flights.
@@ -102,6 +106,10 @@ fn row(vehicle: &str, kind: &str, rows: &[&CaseResult]) -> ReportRow {
         out.named_right += 1;
         delays.extend(r.named_after_s);
         out.class_right += usize::from(r.class_right == Some(true));
+        if r.class_separable == Some(true) {
+            out.class_separable += 1;
+            out.class_right_separable += usize::from(r.class_right == Some(true));
+        }
         let within = |e: Option<f64>| e.is_some_and(|e| e.abs() <= ESTIMATE_TOLERANCE);
         out.estimate_right += usize::from(within(r.gamma_error) && within(r.delta_error));
     }

@@ -43,9 +43,10 @@ const Z_POWER: f64 = 1.645;
 /// with 95 % power: `lambda >= (4.753 + 1.645)² ≈ 40.9`.
 pub const DETECTABLE_LAMBDA: f64 = (Z_FALSE_ALARM + Z_POWER) * (Z_FALSE_ALARM + Z_POWER);
 
-/// One rate axis: a two-state Kalman filter `[omega, gust]` and the signature's error state.
+/// One rate axis: a two-state Kalman filter `[omega, gust]` and the error states of `K`
+/// signatures (they share the filter's covariance and gains, which the signature does not move).
 #[derive(Debug, Clone, Copy)]
-struct RateAxis {
+struct RateAxis<const K: usize> {
     decay: f64,
     hold: f64,
     a: f64,
@@ -53,10 +54,10 @@ struct RateAxis {
     w: f64,
     r: f64,
     p: [[f64; 2]; 2],
-    e: [f64; 2],
+    e: [[f64; 2]; K],
 }
 
-impl RateAxis {
+impl<const K: usize> RateAxis<K> {
     fn new(damping: f64, dt: f64, a: f64, gust_sd: f64, gyro_sd: f64) -> Self {
         let hold = if damping * dt > 1e-12 {
             -(-damping * dt).exp_m1() / damping
@@ -71,12 +72,13 @@ impl RateAxis {
             w,
             r: gyro_sd * gyro_sd,
             p: [[gyro_sd * gyro_sd, 0.0], [0.0, gust_sd * gust_sd]],
-            e: [0.0; 2],
+            e: [[0.0; 2]; K],
         }
     }
 
-    /// One step with the fault's acceleration `s` over it; returns `m² / S`.
-    fn step(&mut self, s: f64) -> f64 {
+    /// One step with each signature's acceleration `s[k]` over it; returns the innovation
+    /// means and their variance.
+    fn step(&mut self, s: &[f64; K]) -> ([f64; K], f64) {
         let (d, h, a) = (self.decay, self.hold, self.a);
         // F = [[d, h a], [0, a]]; Q = w [[h², h], [h, 1]].
         let f = [[d, h * a], [0.0, a]];
@@ -96,40 +98,121 @@ impl RateAxis {
         pp[0][1] += self.w * h;
         pp[1][0] += self.w * h;
         pp[1][1] += self.w;
-        let e = [d * self.e[0] + h * a * self.e[1] + h * s, a * self.e[1]];
         let s_cov = pp[0][0] + self.r;
-        let m = e[0];
-        let k = [pp[0][0] / s_cov, pp[1][0] / s_cov];
-        self.e = [e[0] - k[0] * m, e[1] - k[1] * m];
+        let gain = [pp[0][0] / s_cov, pp[1][0] / s_cov];
+        let mut m = [0.0; K];
+        for (ek, (mk, sk)) in self.e.iter_mut().zip(m.iter_mut().zip(s)) {
+            let e = [d * ek[0] + h * a * ek[1] + h * sk, a * ek[1]];
+            *mk = e[0];
+            *ek = [e[0] - gain[0] * e[0], e[1] - gain[1] * e[0]];
+        }
         // P = (I - K H) P⁻ with H = [1, 0].
         self.p = [
-            [(1.0 - k[0]) * pp[0][0], (1.0 - k[0]) * pp[0][1]],
-            [pp[1][0] - k[1] * pp[0][0], pp[1][1] - k[1] * pp[0][1]],
+            [(1.0 - gain[0]) * pp[0][0], (1.0 - gain[0]) * pp[0][1]],
+            [pp[1][0] - gain[1] * pp[0][0], pp[1][1] - gain[1] * pp[0][1]],
         ];
-        m * m / s_cov
+        (m, s_cov)
     }
 }
 
 /// The vertical axis: the gust alone, measured with a_z.
 #[derive(Debug, Clone, Copy)]
-struct VerticalAxis {
+struct VerticalAxis<const K: usize> {
     a: f64,
     w: f64,
     r: f64,
     p: f64,
-    e: f64,
+    e: [f64; K],
 }
 
-impl VerticalAxis {
-    fn step(&mut self, direct: f64) -> f64 {
+impl<const K: usize> VerticalAxis<K> {
+    fn new(a: f64, gust_sd: f64, az_sd: f64) -> Self {
+        Self {
+            a,
+            w: (1.0 - a * a) * gust_sd * gust_sd,
+            r: az_sd * az_sd,
+            p: gust_sd * gust_sd,
+            e: [0.0; K],
+        }
+    }
+
+    fn step(&mut self, direct: &[f64; K]) -> ([f64; K], f64) {
         let pp = self.a * self.a * self.p + self.w;
-        let e = self.a * self.e;
-        let m = e + direct;
         let s_cov = pp + self.r;
-        let k = pp / s_cov;
-        self.e = e - k * m;
-        self.p = (1.0 - k) * pp;
-        m * m / s_cov
+        let gain = pp / s_cov;
+        let mut m = [0.0; K];
+        for (ek, (mk, dk)) in self.e.iter_mut().zip(m.iter_mut().zip(direct)) {
+            let e = self.a * *ek;
+            *mk = e + dk;
+            *ek = e - gain * *mk;
+        }
+        self.p = (1.0 - gain) * pp;
+        (m, s_cov)
+    }
+}
+
+/// The filters of every axis for `K` signatures and the Gram matrix of their innovation
+/// means, `G_ab = Σ_k m_a,kᵀ S_k⁻¹ m_b,k`.
+#[derive(Debug, Clone)]
+struct Matched<const K: usize> {
+    truth: RateParams,
+    axes: [RateAxis<K>; 3],
+    vertical: Option<VerticalAxis<K>>,
+    gram: [[f64; K]; K],
+}
+
+impl<const K: usize> Matched<K> {
+    fn new(truth: RateParams, noise: OracleNoise) -> Self {
+        let a = (-noise.dt / noise.gust_tau_s.max(noise.dt)).exp();
+        let axes = std::array::from_fn(|i| {
+            RateAxis::new(
+                truth.damping[i],
+                noise.dt,
+                a,
+                noise.gust_sd[i],
+                noise.gyro_sd,
+            )
+        });
+        let vertical = noise
+            .az_sd
+            .map(|sd| VerticalAxis::new(a, noise.gust_sd[3], sd));
+        Self {
+            truth,
+            axes,
+            vertical,
+            gram: [[0.0; K]; K],
+        }
+    }
+
+    /// One step: `deviation[k][j]` is signature k's effective-output deviation of actuator j.
+    fn step(&mut self, deviation: &[&[f64]; K]) {
+        let add = |gram: &mut [[f64; K]; K], m: [f64; K], s_cov: f64| {
+            for a in 0..K {
+                for b in 0..K {
+                    gram[a][b] += m[a] * m[b] / s_cov;
+                }
+            }
+        };
+        for (i, axis) in self.axes.iter_mut().enumerate() {
+            let s = std::array::from_fn(|k| {
+                (self.truth.effectiveness.iter())
+                    .zip(deviation[k])
+                    .map(|(b, d)| b[i] * d)
+                    .sum()
+            });
+            let (m, s_cov) = axis.step(&s);
+            add(&mut self.gram, m, s_cov);
+        }
+        if let Some(v) = self.vertical.as_mut() {
+            let direct = std::array::from_fn(|k| {
+                (self.truth.vertical.iter())
+                    .zip(deviation[k])
+                    .map(|(b, d)| b * d)
+                    .sum()
+            });
+            let (m, s_cov) = v.step(&direct);
+            add(&mut self.gram, m, s_cov);
+        }
     }
 }
 
@@ -147,62 +230,83 @@ pub struct OracleNoise {
 
 /// The matched filter's non-centrality, accumulated step by step along a flight.
 #[derive(Debug, Clone)]
-pub struct Oracle {
-    truth: RateParams,
-    axes: [RateAxis; 3],
-    vertical: Option<VerticalAxis>,
-    lambda: f64,
-}
+pub struct Oracle(Matched<1>);
 
 impl Oracle {
     pub fn new(truth: RateParams, noise: OracleNoise) -> Self {
-        let a = (-noise.dt / noise.gust_tau_s.max(noise.dt)).exp();
-        let axes = std::array::from_fn(|i| {
-            RateAxis::new(
-                truth.damping[i],
-                noise.dt,
-                a,
-                noise.gust_sd[i],
-                noise.gyro_sd,
-            )
-        });
-        let vertical = noise.az_sd.map(|sd| VerticalAxis {
-            a,
-            w: (1.0 - a * a) * noise.gust_sd[3] * noise.gust_sd[3],
-            r: sd * sd,
-            p: noise.gust_sd[3] * noise.gust_sd[3],
-            e: 0.0,
-        });
-        Self {
-            truth,
-            axes,
-            vertical,
-            lambda: 0.0,
-        }
+        Self(Matched::new(truth, noise))
     }
 
     /// One simulator step: `deviation[j]` is actuator j's true `(gamma - 1) u + delta` over it
     /// (0 for a healthy one).
     pub fn step(&mut self, deviation: &[f64]) {
-        for (i, axis) in self.axes.iter_mut().enumerate() {
-            let s: f64 = (self.truth.effectiveness.iter())
-                .zip(deviation)
-                .map(|(b, d)| b[i] * d)
-                .sum();
-            self.lambda += axis.step(s);
-        }
-        if let Some(v) = self.vertical.as_mut() {
-            let s: f64 = (self.truth.vertical.iter())
-                .zip(deviation)
-                .map(|(b, d)| b * d)
-                .sum();
-            self.lambda += v.step(s);
-        }
+        self.0.step(&[deviation]);
     }
 
     /// The non-centrality so far.
     pub fn lambda(&self) -> f64 {
-        self.lambda
+        self.0.gram[0][0]
+    }
+}
+
+/// How well the best classifier there is could tell one actuator's fault from a change of
+/// the other kinds on the same actuator from the same onset: the oracle above, for the fault's
+/// signature `s` and the two one-parameter alternatives, a gain change (`(γ' - 1) u` along the
+/// flown command) and an offset (`δ'`). The alternative of a kind closest to the fault, in the
+/// matched filter's metric, leaves `lambda_sep = G_ss - G_sa² / G_aa` of it: the non-centrality
+/// of the test between the fault and that alternative (its best size known). A class the
+/// data separate by less than [`DETECTABLE_LAMBDA`] is one no monitor can be asked to tell.
+#[derive(Debug, Clone)]
+pub struct KindOracle {
+    matched: Matched<3>,
+    actuator: usize,
+    deviation: Vec<f64>,
+    gain: Vec<f64>,
+    offset: Vec<f64>,
+}
+
+/// The kinds a fault can be told from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Alternative {
+    Gain,
+    Offset,
+}
+
+impl KindOracle {
+    /// For actuator `actuator` of `actuators`.
+    pub fn new(truth: RateParams, noise: OracleNoise, actuator: usize, actuators: usize) -> Self {
+        Self {
+            matched: Matched::new(truth, noise),
+            actuator,
+            deviation: vec![0.0; actuators],
+            gain: vec![0.0; actuators],
+            offset: vec![0.0; actuators],
+        }
+    }
+
+    /// One simulator step: the actuator's true deviation and its command, and whether the
+    /// fault has begun (the alternatives start with it).
+    pub fn step(&mut self, deviation: f64, command: f64, begun: bool) {
+        let j = self.actuator;
+        self.deviation[j] = deviation;
+        self.gain[j] = if begun { command } else { 0.0 };
+        self.offset[j] = if begun { 1.0 } else { 0.0 };
+        self.matched
+            .step(&[&self.deviation, &self.gain, &self.offset]);
+    }
+
+    /// What of the fault's non-centrality the best alternative of `kind` leaves.
+    pub fn lambda_from(&self, kind: Alternative) -> f64 {
+        let g = &self.matched.gram;
+        let a = match kind {
+            Alternative::Gain => 1,
+            Alternative::Offset => 2,
+        };
+        if g[a][a] > 0.0 {
+            (g[0][0] - g[0][a] * g[0][a] / g[a][a]).max(0.0)
+        } else {
+            g[0][0]
+        }
     }
 }
 
@@ -298,5 +402,64 @@ mod tests {
         let (small, big) = (run(0.01), run(0.02));
         assert!((big / small - 4.0).abs() < 1e-9, "{small} {big}");
         assert!((DETECTABLE_LAMBDA - 40.9).abs() < 0.05);
+    }
+    /// The class oracle: a fault of one kind leaves nothing against an alternative of its own
+    /// kind; a gain change is an offset while the command stands still, and tells itself from
+    /// one as much as the command moves; the sum it leaves is at most the fault's lambda.
+    #[test]
+    fn kind_separation_is_what_the_command_moves() {
+        let truth = RateParams {
+            damping: [3.0; 3],
+            effectiveness: vec![[10.0, -4.0, 1.0], [2.0, 6.0, -1.0]],
+            vertical: vec![],
+            offset: [0.0; 3],
+            vertical_offset: 0.0,
+        };
+        let noise = OracleNoise {
+            dt: 0.02,
+            gust_tau_s: 1.0,
+            gust_sd: [0.5, 0.5, 0.15, 0.0],
+            gyro_sd: 0.01,
+            az_sd: None,
+        };
+        // Actuator 1 from step 50, with a command swinging by `amp` about 0.5.
+        let run = |gain: bool, amp: f64| {
+            let mut o = KindOracle::new(truth.clone(), noise, 1, 2);
+            for k in 0..300 {
+                let u = 0.5 + amp * (k as f64 * 0.1).sin();
+                let begun = k >= 50;
+                let deviation = match (begun, gain) {
+                    (false, _) => 0.0,
+                    (true, true) => -0.3 * u,
+                    (true, false) => -0.15,
+                };
+                o.step(deviation, u, begun);
+            }
+            o
+        };
+        let offset = run(false, 0.1);
+        assert!(
+            offset.lambda_from(Alternative::Offset) < 1e-6 * offset.lambda_from(Alternative::Gain)
+        );
+        let gain = run(true, 0.1);
+        assert!(gain.lambda_from(Alternative::Gain) < 1e-6 * gain.lambda_from(Alternative::Offset));
+        let still = run(true, 0.0);
+        assert!(
+            still.lambda_from(Alternative::Offset) < 1e-9,
+            "{}",
+            still.lambda_from(Alternative::Offset)
+        );
+        let (small, big) = (run(true, 0.05), run(true, 0.1));
+        let ratio = big.lambda_from(Alternative::Offset) / small.lambda_from(Alternative::Offset);
+        assert!((3.0..5.0).contains(&ratio), "{ratio}");
+        // The fault's own lambda is the detection oracle's.
+        let mut detect = Oracle::new(truth.clone(), noise);
+        for k in 0..300 {
+            let u = 0.5 + 0.1 * (k as f64 * 0.1).sin();
+            detect.step(&[0.0, if k >= 50 { -0.3 * u } else { 0.0 }]);
+        }
+        let total = gain.matched.gram[0][0];
+        assert!((total - detect.lambda()).abs() < 1e-9 * total);
+        assert!(gain.lambda_from(Alternative::Offset) <= total);
     }
 }

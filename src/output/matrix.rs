@@ -16,14 +16,15 @@ fn secs(v: Option<f64>) -> String {
 }
 
 /// One line per row: detection among the oracle-detectable cases (named right within 5 s),
-/// its delays, class and estimates of those named right, wrong-actuator decisions on cases the
+/// its delays, class and estimates of those named right (`sep%`: the class right among those
+/// whose class the class oracle separates from the other kinds), wrong-actuator decisions on cases the
 /// oracle cannot detect, false decisions before the onsets and in healthy flights (and per
 /// healthy hour).
 pub fn render(rows: &[ReportRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
         "vehicle",
         "fault",
         "cases",
@@ -32,6 +33,7 @@ pub fn render(rows: &[ReportRow]) -> String {
         "p50_s",
         "p90_s",
         "class%",
+        "sep%",
         "est%",
         "undet_w",
         "pre_on",
@@ -47,7 +49,7 @@ pub fn render(rows: &[ReportRow]) -> String {
         };
         let _ = writeln!(
             s,
-            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
             r.vehicle,
             r.kind,
             r.cases,
@@ -56,6 +58,7 @@ pub fn render(rows: &[ReportRow]) -> String {
             secs(r.delay_p50_s),
             secs(r.delay_p90_s),
             pct(r.class_right, r.named_right),
+            pct(r.class_right_separable, r.class_separable),
             pct(r.estimate_right, r.named_right),
             r.undetectable_wrong,
             r.false_before_onset,
