@@ -51,22 +51,31 @@ impl Diagnoser {
     /// C1: the class the data give actuator `j`: the reading is its, the stretch at least
     /// `CLASS_MIN_S`, one kind beats the others by `DATA_MARGIN` and the pair of gain and
     /// offset is not significantly better (`PAIR_INSIGNIFICANT`); a motor's or throttle's gain
-    /// against offset on the whitened residual.
+    /// against offset on the whitened residual. A ramp that beats the best step is a drift.
     pub(super) fn data_class(&self, j: usize) -> Option<FaultClass> {
         let r = self.reading.filter(|r| r.actuator == j)?;
         let p = &self.params;
         if r.samples as f64 * self.dt < CLASS_MIN_S {
             return None;
         }
-        if self.is_angle[j] {
-            let span = r.ramp_samples as f64 * self.dt;
-            if span >= CLASS_MIN_S
-                && (r.ramp_rate * span).abs() > p.bias_tau
-                && r.ramp_drop >= r.mixed_drop
-                && -r.margin_over(r.ramp_drop) >= DATA_MARGIN
-            {
-                return Some(FaultClass::Drift);
-            }
+        // A drift: the residual's ramp beats the best step clearly, fits as well as the pair
+        // and moves the output away from the healthy model's (a ramp back toward it is a
+        // fault's end or the wind's slow part). On a surface an offset growing; on a motor
+        // also a gain weakening under a controller that holds the thrust, whose command then
+        // rises along a ramp.
+        let span = r.ramp_samples as f64 * self.dt;
+        let deviation = match r.kind {
+            ChangeKind::Gain => (r.value - 1.0) * r.command_mean,
+            ChangeKind::Offset => r.value,
+            ChangeKind::Stuck => r.value - r.command_mean,
+        };
+        if span >= CLASS_MIN_S
+            && r.ramp_rate * deviation > 0.0
+            && (r.ramp_rate * span).abs() > p.bias_tau
+            && r.ramp_drop >= r.mixed_drop
+            && -r.margin_over(r.ramp_drop) >= DATA_MARGIN
+        {
+            return Some(FaultClass::Drift);
         }
         let (kind, value, margin, mixed) = match self.whitened_kind(j) {
             Some(f) => (f.kind, f.value, f.margin, f.mixed_margin),

@@ -45,7 +45,7 @@ use crate::telemetry::{Profile, Role};
 /// Twice the log likelihood ratio that counts as clear (a ratio of e^10, about 2e4 to 1).
 const DATA_MARGIN: f64 = 20.0;
 /// A changed stretch this long is needed before the data give a class or alarm (s).
-const CLASS_MIN_S: f64 = 1.0;
+pub(crate) const CLASS_MIN_S: f64 = 1.0;
 /// The change test's store (s, at most `change::MAX_STORE` samples) and its shortest fit.
 const CHANGE_HORIZON_S: f64 = 6.0;
 const CHANGE_MIN_S: f64 = 0.2;
@@ -67,7 +67,7 @@ const FREE_FALL_G: f64 = 0.3;
 const ENVELOPE_S: f64 = 0.2;
 
 /// A new class must hold this long before a `changed` decision reports it (s).
-const CLASS_HOLD_S: f64 = 1.0;
+pub(crate) const CLASS_HOLD_S: f64 = 1.0;
 /// A single kind is the data's class only where a gain and an offset together do not fit
 /// significantly better: twice their log likelihood ratio, one parameter more, under the 95 %
 /// point of chi-squared with one degree of freedom.

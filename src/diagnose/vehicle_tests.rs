@@ -366,6 +366,79 @@ fn k1_a_class_the_data_read_again_is_theirs_and_their_fit_is_followed() {
 }
 
 #[test]
+fn c1_a_motors_gain_weakening_under_a_thrust_holding_controller_is_a_drift() {
+    // Quad X motor 1's gain ramps from 1 by -0.05 a second from 8 s; the controller holds its
+    // thrust, so its command rises as 0.5 / gamma (with its dither) and its output stays at
+    // 0.5: read as a step, the data's best kind is a stuck output. The residual's ramp beats
+    // the step: a drift.
+    let mut f = Flight::new("quad-x");
+    let gamma = |t: f64| {
+        if t >= 8.0 {
+            1.0 - 0.05 * (t - 8.0)
+        } else {
+            1.0
+        }
+    };
+    let dither = dithered(4, 0.0, 0.03);
+    let u = move |t: f64| {
+        let mut u: Vec<f64> = dither(t).iter().map(|d| 0.5 + d).collect();
+        u[0] = 0.5 / gamma(t) + u[0] - 0.5;
+        u
+    };
+    let est = move |t: f64| {
+        let mut e = vec![healthy(0.02); 4];
+        if t >= 9.0 {
+            e[0] = estimate(gamma(t), 0.05, 0.0, 0.02);
+        }
+        e
+    };
+    let change = move |t: f64, u: &[f64]| (0usize, (gamma(t) - 1.0) * u[0]);
+    f.fly(0.0, 14.0, u, est, Some(&change));
+    let classed: Vec<_> = (f.decisions.iter())
+        .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
+        .collect();
+    let last = classed.last().expect("decided");
+    assert_eq!(last.actuator.as_deref(), Some("motor1"), "{classed:?}");
+    assert_eq!(last.class, Some(FaultClass::Drift), "{classed:?}");
+}
+
+#[test]
+fn c1_a_ramp_back_toward_the_healthy_output_is_no_drift() {
+    // Plane aileron: an offset of +0.3 from 2 s, which from 9 s eases back by 0.04 a second
+    // (the fault's end, or the wind's slow part): the store then holds a ramp, but one toward
+    // the healthy output. The bias stays; the same ramp away from it is a drift.
+    let run = |away: bool| {
+        let mut f = Flight::new("plane");
+        let sign = if away { 1.0 } else { -1.0 };
+        let offset = move |t: f64| {
+            if t < 2.0 {
+                0.0
+            } else {
+                0.3 + sign * 0.04 * (t - 9.0).max(0.0)
+            }
+        };
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); 3];
+            if t >= 2.0 {
+                e[0] = estimate(1.0, 0.05, offset(t), 0.02);
+            }
+            e
+        };
+        let change = move |t: f64, _: &[f64]| (0usize, offset(t));
+        f.fly(0.0, 16.0, dithered(3, 0.3, 0.02), est, Some(&change));
+        (f.decisions.iter())
+            .filter(|d| matches!(d.event, Event::Fault | Event::Changed))
+            .filter_map(|d| d.class)
+            .collect::<Vec<_>>()
+    };
+    let toward = run(false);
+    assert_eq!(toward.first(), Some(&FaultClass::Bias), "{toward:?}");
+    assert!(!toward.contains(&FaultClass::Drift), "{toward:?}");
+    let away = run(true);
+    assert!(away.contains(&FaultClass::Drift), "{away:?}");
+}
+
+#[test]
 fn every_decision_says_its_rule() {
     let f = hexa_motor5_stuck(true);
     assert!(!f.decisions.is_empty());

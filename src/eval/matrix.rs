@@ -38,6 +38,10 @@ pub const JUDGE_AFTER_S: f64 = 5.0;
 const RAMP_S: f64 = 8.0;
 /// MIT-UKF gamma and delta within this of the truth count as right.
 pub const ESTIMATE_TOLERANCE: f64 = 0.1;
+/// The soonest the diagnosis can report a new class after the fault changes kind: a class
+/// needs `CLASS_MIN_S` of changed data and holds `CLASS_HOLD_S` before a `changed` decision.
+pub const CLASS_LATENCY_S: f64 =
+    crate::diagnose::vehicle::CLASS_MIN_S + crate::diagnose::vehicle::CLASS_HOLD_S;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -74,7 +78,8 @@ impl FaultKind {
     /// Whether `class` is right for this fault when its truth is `(gamma, delta)` at the
     /// judging time: the class definitions applied to the truth (`docs/diagnosis.md`), so a
     /// surface stuck at a trim near 0 (gain 0, no offset) is stuck or a loss, a gain ramp a
-    /// drift while it moves and a loss either way.
+    /// drift while it moves (and for [`CLASS_LATENCY_S`] after: no class change can be
+    /// reported sooner) and a loss either way.
     pub fn right_class(self, class: &str, gamma: f64, delta: f64, t_sim: f64) -> bool {
         let p = crate::diagnose::vehicle::DiagnosisParams::default();
         let loss = gamma < 1.0 - p.loe_tau && delta.abs() <= p.bias_tau;
@@ -83,7 +88,7 @@ impl FaultKind {
             "loss_of_effectiveness" => loss,
             "bias" => bias,
             "stuck" => self == Self::StuckNearTrim,
-            "drift" => self == Self::RampTo060 && t_sim < ONSET_S + RAMP_S,
+            "drift" => self == Self::RampTo060 && t_sim < ONSET_S + RAMP_S + CLASS_LATENCY_S,
             _ => false,
         }
     }
