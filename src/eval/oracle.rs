@@ -314,11 +314,8 @@ impl KindOracle {
 mod tests {
     use super::*;
 
-    /// The recursion against a plain Kalman filter run on the noise-free response to the
-    /// fault: with no noise and no gust the filter's innovations are exactly their means
-    /// under the fault, so `Σ innovation² / S` must equal the oracle's `lambda`.
-    #[test]
-    fn lambda_matches_a_kalman_filter_run_on_noise_free_data() {
+    /// Two actuators on three rate axes, in the built-in weather's gusts.
+    fn two_actuators() -> (RateParams, OracleNoise) {
         let truth = RateParams {
             damping: [3.0, 2.0, 1.0],
             effectiveness: vec![[10.0, -5.0, 2.0], [0.0, 4.0, -1.0]],
@@ -333,6 +330,15 @@ mod tests {
             gyro_sd: 0.01,
             az_sd: None,
         };
+        (truth, noise)
+    }
+
+    /// The recursion against a plain Kalman filter run on the noise-free response to the
+    /// fault: with no noise and no gust the filter's innovations are exactly their means
+    /// under the fault, so `Σ innovation² / S` must equal the oracle's `lambda`.
+    #[test]
+    fn lambda_matches_a_kalman_filter_run_on_noise_free_data() {
+        let (truth, noise) = two_actuators();
         let dev_at = |k: usize| if k >= 100 { [0.0, -0.2] } else { [0.0, 0.0] };
         let mut oracle = Oracle::new(truth.clone(), noise);
         let mut brute = 0.0;
@@ -408,20 +414,7 @@ mod tests {
     /// one as much as the command moves; the sum it leaves is at most the fault's lambda.
     #[test]
     fn kind_separation_is_what_the_command_moves() {
-        let truth = RateParams {
-            damping: [3.0; 3],
-            effectiveness: vec![[10.0, -4.0, 1.0], [2.0, 6.0, -1.0]],
-            vertical: vec![],
-            offset: [0.0; 3],
-            vertical_offset: 0.0,
-        };
-        let noise = OracleNoise {
-            dt: 0.02,
-            gust_tau_s: 1.0,
-            gust_sd: [0.5, 0.5, 0.15, 0.0],
-            gyro_sd: 0.01,
-            az_sd: None,
-        };
+        let (truth, noise) = two_actuators();
         // Actuator 1 from step 50, with a command swinging by `amp` about 0.5.
         let run = |gain: bool, amp: f64| {
             let mut o = KindOracle::new(truth.clone(), noise, 1, 2);
