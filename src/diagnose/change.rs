@@ -629,6 +629,7 @@ impl ChangeTest {
             stuck_std: (stuck_var / ox).sqrt(),
             pair_gamma,
             pair_gamma_std,
+            pair_delta: pair.map_or(f64::NAN, |(_, d)| d),
         })
     }
 }
@@ -814,6 +815,8 @@ pub struct KindFit {
     /// cannot be told apart).
     pub pair_gamma: f64,
     pub pair_gamma_std: f64,
+    /// The pair's offset (NaN without a pair).
+    pub pair_delta: f64,
 }
 
 /// What the residual's colour learns from a stored sample.

@@ -77,16 +77,23 @@ impl Diagnoser {
         {
             return Some(FaultClass::Drift);
         }
-        let (kind, value, margin, mixed) = match self.whitened_kind(j) {
-            Some(f) => (f.kind, f.value, f.margin, f.mixed_margin),
+        let (kind, value, margin, mixed, pair_keeps) = match self.whitened_kind(j) {
+            Some(f) => (
+                f.kind,
+                f.value,
+                f.margin,
+                f.mixed_margin,
+                self.pair_keeps_kind(&f),
+            ),
             None => (
                 r.kind,
                 r.value,
                 r.margin_over(r.next_kind_drop),
                 -r.margin_over(r.mixed_drop),
+                false,
             ),
         };
-        if margin < DATA_MARGIN || mixed >= PAIR_INSIGNIFICANT {
+        if margin < DATA_MARGIN || (mixed >= PAIR_INSIGNIFICANT && !pair_keeps) {
             return None;
         }
         let whitened = self.whitened_kind(j).is_some();
@@ -100,6 +107,19 @@ impl Diagnoser {
             }
             ChangeKind::Stuck => Some(FaultClass::Stuck),
             _ => None,
+        }
+    }
+    /// Whether a gain and an offset fitted together leave the whitened fit's kind its class:
+    /// the pair's other coefficient is within the tolerance that tells the class (an offset's
+    /// pair gain within `loe_tau` of 1, a gain's pair offset within `bias_tau`), so the class
+    /// definitions applied to the pair read the same class. The pair then fits better only by
+    /// what the tolerance is for: the calibrated model's own error on the command's swings.
+    pub(super) fn pair_keeps_kind(&self, f: &KindFit) -> bool {
+        let p = &self.params;
+        match f.kind {
+            ChangeKind::Gain => f.pair_delta.abs() <= p.bias_tau,
+            ChangeKind::Offset => (f.pair_gamma - 1.0).abs() <= p.loe_tau,
+            ChangeKind::Stuck => false,
         }
     }
     /// Whether the command separates gain and bias: its std over the window at least
@@ -233,7 +253,9 @@ impl Diagnoser {
         let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
         let motor_offset_plain =
             whitened.is_none() && kind == ChangeKind::Offset && self.isolation.is_motor[j];
-        if !long || margin < DATA_MARGIN || mixed_margin >= DATA_MARGIN || motor_offset_plain {
+        let pair_keeps = whitened.is_some_and(|f| self.pair_keeps_kind(&f));
+        let pair_better = mixed_margin >= DATA_MARGIN && !pair_keeps;
+        if !long || margin < DATA_MARGIN || pair_better || motor_offset_plain {
             return None;
         }
         if !(value.is_finite() && std.is_finite() && std > 0.0) {

@@ -169,6 +169,7 @@ impl Diagnoser {
         st.class_from_data = class_rule == Rule::C1;
         st.class_mixed = mixed;
         st.class_candidate = None;
+        st.stronger_since = None;
         st.decided_at = t;
         st.decided_by = Some(rule);
     }
@@ -251,17 +252,21 @@ impl Diagnoser {
         } else {
             let st = &mut self.actuators[j];
             st.class_candidate = None;
-            // The class in force read again, on current evidence, by a stronger rule: it is
-            // that rule's from now on (the data's class outranks the filters', a told kind the
-            // mixed fallback), so what follows the class (the filters' identification) follows
-            // the stronger reading.
-            if class == prev && current && !ukf_warming {
-                if rule == Rule::C1 && !st.class_from_data {
-                    st.class_from_data = true;
+            // The class in force read again, on current evidence, by a stronger rule (the
+            // data's class outranks the filters', a told kind the mixed fallback) for
+            // `CLASS_HOLD_S`, as a new class must hold: it is that rule's from then on, so what
+            // follows the class (the filters' identification) follows the stronger reading.
+            let by_data = rule == Rule::C1 && !st.class_from_data;
+            let told = rule == Rule::C2 && !mixed && st.class_mixed;
+            if class == prev && current && !ukf_warming && (by_data || told) {
+                let since = *st.stronger_since.get_or_insert(t);
+                if t - since >= CLASS_HOLD_S {
+                    st.class_from_data |= by_data;
                     st.class_mixed = false;
-                } else if rule == Rule::C2 && !mixed {
-                    st.class_mixed = false;
+                    st.stronger_since = None;
                 }
+            } else {
+                st.stronger_since = None;
             }
         }
         let union = self.actuators[j].decided_filters | alarms;
@@ -281,6 +286,7 @@ impl Diagnoser {
             if next != prev {
                 st.class_from_data = rule == Rule::C1;
                 st.class_mixed = mixed;
+                st.stronger_since = None;
             }
         }
     }

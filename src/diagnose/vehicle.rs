@@ -138,6 +138,8 @@ struct Actuator {
     class_mixed: bool,
     /// A class other than the one in force, and since when it has been read.
     class_candidate: Option<(FaultClass, f64)>,
+    /// Since when the class in force has been read by a stronger rule than the one it has.
+    stronger_since: Option<f64>,
     /// Seconds the MIT-UKF's bounds have excluded (included) the healthy point.
     bounds_out: f64,
     bounds_in: f64,

@@ -93,12 +93,16 @@ impl FaultKind {
         }
     }
 
-    /// The kinds of change a classifier must tell this fault from: a loss (or a gain ramp)
-    /// from an offset, an offset from a gain change, a stuck output from either.
-    fn alternatives(self) -> &'static [Alternative] {
+    /// The kinds of change whose classes [`Self::right_class`] rejects for this fault, which a
+    /// classifier must tell it from: a loss (or a gain ramp) an offset, an offset a gain
+    /// change, a stuck output either (a gain change only at a trim beyond the bias tolerance:
+    /// stuck near 0 is gain 0, a loss too).
+    fn alternatives(self, trim: f64) -> &'static [Alternative] {
+        let bias_tau = crate::diagnose::vehicle::DiagnosisParams::default().bias_tau;
         match self {
             Self::Loss050 | Self::Loss075 | Self::RampTo060 => &[Alternative::Offset],
             Self::BiasUp | Self::BiasDown => &[Alternative::Gain],
+            Self::StuckNearTrim if trim.abs() <= bias_tau => &[Alternative::Offset],
             Self::StuckNearTrim => &[Alternative::Gain, Alternative::Offset],
         }
     }
@@ -412,7 +416,7 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
         if let (Some(j), Some(k), Some((_, kind))) = (target, kind_oracle.as_mut(), &case.fault) {
             truth_at.push((prev.t + BOOT_OFFSET_S, prev.gamma[j], prev.delta[j]));
             k.step(deviation[j], prev.u[j], prev.t >= ONSET_S);
-            let sep = (kind.alternatives().iter())
+            let sep = (kind.alternatives(trim).iter())
                 .map(|&a| k.lambda_from(a))
                 .fold(f64::INFINITY, f64::min);
             class_lambda_at.push(sep);
