@@ -111,6 +111,15 @@ pub struct EvalArgs {
     /// With --matrix: minutes of each healthy flight (one per vehicle, flight, weather and seed).
     #[arg(long, requires = "matrix", value_name = "MIN", default_value_t = 10.0)]
     pub healthy_minutes: f64,
+    /// With --matrix: only this vehicle (repeat for several): quad-x, quad-plus, hexa-x,
+    /// heli-h3-120, plane.
+    #[arg(long = "vehicle", requires = "matrix", value_name = "NAME")]
+    pub vehicles: Vec<String>,
+    /// With --matrix: number the seeds from this one (seeds 11-20 are flights no figure in
+    /// docs/results.md was tuned on).
+    #[arg(long, requires = "matrix", value_name = "N", default_value_t = 1,
+          value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub first_seed: u64,
     // --decisions / --estimates: of the first seed, one vehicle scenario only.
     #[command(flatten)]
     pub output: OutputArgs,

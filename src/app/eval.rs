@@ -20,6 +20,8 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
         matrix,
         fast,
         healthy_minutes,
+        vehicles,
+        first_seed,
     } = a;
     if matrix {
         if output.any() {
@@ -29,7 +31,14 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             .into());
         }
         let minutes = in_range("--healthy-minutes", healthy_minutes, 0.5, 600.0)?;
-        return super::matrix::run(seeds, minutes * 60.0, fast, json);
+        let spec = ahcmon::eval::matrix::MatrixSpec {
+            seeds,
+            first_seed,
+            healthy_s: minutes * 60.0,
+            fast,
+            vehicles,
+        };
+        return super::matrix::run(spec, json);
     }
     if output.any() {
         let [one] = scenarios.as_slice() else {

@@ -8,12 +8,7 @@ use rayon::prelude::*;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-pub fn run(seeds: u64, healthy_s: f64, fast: bool, json: bool) -> anyhow::Result<()> {
-    let spec = MatrixSpec {
-        seeds,
-        healthy_s,
-        fast,
-    };
+pub fn run(spec: MatrixSpec, json: bool) -> anyhow::Result<()> {
     let cases = matrix::cases(&spec)?;
     let started = std::time::Instant::now();
     let done = AtomicUsize::new(0);

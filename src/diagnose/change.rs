@@ -59,6 +59,9 @@ pub struct Reading {
     /// The actuator's mean command over the changed stretch (a stuck output's distance from
     /// it is the size of that change).
     pub command_mean: f64,
+    /// The root mean square of that command: with the change, the size of a gain's or a
+    /// stuck output's deviation over the stretch.
+    pub command_rms: f64,
     /// The best drop of another kind of change of the same actuator.
     pub next_kind_drop: f64,
     /// The best drop of a gain and an offset of the same actuator changing together (two
@@ -383,6 +386,16 @@ impl ChangeTest {
         self.len == 0
     }
 
+    /// The root mean square of actuator `j`'s command over the newest `samples` stored.
+    fn command_rms(&self, j: usize, samples: usize) -> f64 {
+        let cap = self.buf.len();
+        let n = samples.min(self.len).max(1);
+        let ss: f64 = (1..=n)
+            .map(|k| self.buf[(self.head + cap - k) % cap].u[j].powi(2))
+            .sum();
+        (ss / n as f64).sqrt()
+    }
+
     /// The best change over the stored stretch, `None` with too few samples. No allocation.
     pub fn evaluate(&self) -> Option<Reading> {
         if self.len < self.min_samples {
@@ -502,6 +515,7 @@ impl ChangeTest {
             autocorrelation,
             value_std,
             command_mean: h.4,
+            command_rms: self.command_rms(j, h.1),
             actuator: j,
             kind: kinds[k],
             value: h.2,
@@ -782,6 +796,7 @@ impl ChangeTest {
             noise_var,
             autocorrelation: 0.0,
             command_mean: h.4,
+            command_rms: self.command_rms(j, h.1),
             next_kind_drop: top.next_kind_drop,
             mixed_drop: mixed[j],
             next_actuator_drop: top.next_actuator_drop,
@@ -1170,6 +1185,7 @@ mod tests {
             noise_var: 1.0,
             autocorrelation: 0.0,
             command_mean: 0.5,
+            command_rms: 0.5,
             next_kind_drop: 100.0,
             next_actuator_drop: 0.0,
             mixed_drop: 0.0,

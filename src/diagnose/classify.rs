@@ -20,24 +20,31 @@ impl Diagnoser {
         self.whitened
             .filter(|_| self.reading.is_some_and(|r| r.actuator == j))
     }
-    /// A reading's change is as large as the thresholds call a fault: a gain by the gain
-    /// statistic's measure (`(1 - γ) gain_ref` against `gain_threshold`; none without one), an
-    /// offset or a stuck output's distance from the mean command against `threshold`: the
-    /// sizes the filters' statistics must reach, set on healthy flights.
-    pub(super) fn beyond_thresholds(&self, r: &Reading) -> bool {
+    /// A reading's change is a fault: a gain under `1 - loe_tau` (a loss by the class's
+    /// definition: near trim a surface's output moves little whatever its gain, so the gain's
+    /// own size is the measure; a gain above one is no class, and is what a model calibrated in
+    /// closed loop reads on a healthy actuator); a stuck output whose deviation from the
+    /// commands, its root mean square over the changed stretch, is beyond `bias_tau` (stuck is
+    /// a kind, told by the output no longer following the commands); an offset at least
+    /// `threshold` and beyond `bias_tau` (an offset is a fault by its size alone, and the
+    /// wind's and the model's slow part imitate one up to the deviation healthy flights show).
+    pub(super) fn is_fault_size(&self, r: &Reading) -> bool {
         let p = &self.params;
-        let (gain_min, size_min) = (p.gain_threshold / p.gain_ref, p.threshold);
         match r.kind {
-            ChangeKind::Gain => (1.0 - r.value).abs() >= gain_min,
-            ChangeKind::Offset => r.value.abs() >= size_min,
-            ChangeKind::Stuck => (r.value - r.command_mean).abs() >= size_min,
+            ChangeKind::Gain => 1.0 - r.value > p.loe_tau,
+            ChangeKind::Offset => r.value.abs() >= p.threshold && r.value.abs() > p.bias_tau,
+            ChangeKind::Stuck => {
+                let ms = r.command_rms * r.command_rms;
+                let rms = (r.value * r.value - 2.0 * r.value * r.command_mean + ms).max(0.0);
+                rms.sqrt() > p.bias_tau
+            }
         }
     }
     /// D2: the actuator the data alarm on: named clearly by the whitened search (its margin is
     /// honest about the wind's colour; the plain search's counts it only through the lag-one
     /// autocorrelation, and in 1.5 times the gusts read healthy surfaces clearly changed), on a
-    /// change of at least `CLASS_MIN_S` that began with a second of the store before it, as
-    /// large as the thresholds call a fault.
+    /// change of at least `CLASS_MIN_S` that began with a second of the store before it, of a
+    /// fault's size ([`Self::is_fault_size`]).
     pub(super) fn data_alarm(&self) -> Option<usize> {
         let r = self.naming_reading()?;
         let before = (1.0 / self.dt).round() as usize;
@@ -45,7 +52,7 @@ impl Diagnoser {
         (self.reading_whitened
             && long
             && r.samples + before <= self.change.len()
-            && self.beyond_thresholds(&r))
+            && self.is_fault_size(&r))
         .then_some(r.actuator)
     }
     /// C1: the class the data give actuator `j`: the reading is its, the stretch at least

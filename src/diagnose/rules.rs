@@ -61,7 +61,10 @@ impl Diagnoser {
         out: &mut Vec<Decision>,
     ) {
         let alarms = self.actuators[j].alarms();
-        let best = self.reading.map(|r| r.actuator);
+        let best = self
+            .reading
+            .filter(|_| !self.reading_scanned)
+            .map(|r| r.actuator);
         // The data name another actuator clearly: this alarm is its evidence, even when that
         // actuator's fault is in force (the filters spread a fault over other actuators for as
         // long as it lasts; a second fault under it is listed in its `also`).
@@ -188,10 +191,12 @@ impl Diagnoser {
         // (The data naming the actuator do not hold the fault: after its end the store still
         // holds it, and its end is a change too. A data alarm needs a change that began inside
         // the store, which the end of a fault is not.)
-        // A fault the data alone decided (F3) stands while they name it clearly: once it is in
-        // force the whitened search gives way to the plain one, so no data alarm follows it.
-        let data_hold = st.decided_by == Some(Rule::F3)
-            && self.naming_reading().is_some_and(|r| r.actuator == j);
+        // A fault the data alone decided (F3) stands until they have not named it clearly
+        // for `clear_s`, as a filter's alarm ends (once it is in force the whitened search
+        // gives way to the plain one, which may lose it for a moment while the fault's start
+        // and the manoeuvres after it share the store).
+        let data_hold =
+            st.decided_by == Some(Rule::F3) && t - st.data_named_at < self.params.clear_s;
         if alarms == 0 && data_alarm != Some(j) && !data_hold {
             let mut d = self.decision(t, j, Event::Cleared, None, 0, Rule::R1);
             d.detail = Some(format!(

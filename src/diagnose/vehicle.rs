@@ -53,6 +53,8 @@ const CHANGE_MIN_S: f64 = 0.2;
 const MAX_HOLE_S: f64 = 1.0;
 /// Memory of the residual's learned colour (s).
 const COLOUR_MEMORY_S: f64 = 60.0;
+/// While nothing is under way, the data are read this often (s).
+const SCAN_S: f64 = 0.1;
 /// How long a filter alarm waits for the data before F2 decides it (s). The change test needs
 /// `CHANGE_MIN_S` to fit and about a second to be clear; a filters' misreading at a fault's
 /// onset ends within their alarm plus `clear_s`.
@@ -132,6 +134,8 @@ struct Actuator {
     /// When the data last named another actuator clearly during this actuator's alarm (F2's
     /// wait runs from then).
     contradicted_at: f64,
+    /// When the data last named this actuator clearly (R1's hold of a fault they decided).
+    data_named_at: f64,
     /// The class in force came from the data (C1), or from the filters' mixed fallback (a
     /// tie-break, not a kind: the filters are not held to it).
     class_from_data: bool,
@@ -181,6 +185,11 @@ pub struct Diagnoser {
     whitened: Option<KindFit>,
     /// The reading came from the whitened search.
     reading_whitened: bool,
+    /// When the data are next read while nothing is under way, and whether the reading is such
+    /// a scan's (of a stretch where nothing was under way: the data's alarm may use it, F1's
+    /// "the data fit it best" takes a reading of what is under way).
+    next_scan: f64,
+    reading_scanned: bool,
     /// Rule X1: the lean limit, since when the vehicle has been out of its envelope and why,
     /// and whether that has lasted `ENVELOPE_S` (a crash).
     envelope_rad: f64,
@@ -235,6 +244,8 @@ impl Diagnoser {
             reading: None,
             whitened: None,
             reading_whitened: false,
+            next_scan: f64::NEG_INFINITY,
+            reading_scanned: false,
             envelope_rad: if profile.vehicle == crate::telemetry::VehicleKind::Plane {
                 ENVELOPE_PLANE_RAD
             } else {
@@ -303,12 +314,14 @@ impl Diagnoser {
             .fold(0, |m, k| m | (1 << k))
     }
 
-    /// A fault in force, or a CUSUM above zero: the change test reads the data.
+    /// A fault in force, a CUSUM above zero, or the data naming an actuator clearly: the
+    /// change test reads the data on every step, and the residual's colour does not learn.
     fn under_way(&self) -> bool {
-        self.actuators.iter().any(|st| {
-            matches!(st.health, Health::Fault(_))
-                || st.channels.iter().any(|c| c.cusum > 0.0 || c.alarm)
-        })
+        self.naming_reading().is_some()
+            || self.actuators.iter().any(|st| {
+                matches!(st.health, Health::Fault(_))
+                    || st.channels.iter().any(|c| c.cusum > 0.0 || c.alarm)
+            })
     }
 
     /// A new flight or a restart: the stored residuals belong to another one.
@@ -438,19 +451,26 @@ impl Diagnoser {
             }
         }
         let under_way = warm && self.under_way();
+        // While nothing is under way the data are still read, every `SCAN_S`: a change that
+        // the filters' statistics do not reach (a surface's loss near trim) is theirs to find.
+        let scan = warm && !under_way && t >= self.next_scan;
+        if scan {
+            self.next_scan = t + SCAN_S;
+        }
         // Until a fault is in force the whitened search reads changes (a step's weight is in
         // its first samples, before the wind has moved); a level that has stood longer than
         // the store looks to it like the wind, so a decided fault is followed by the plain one.
-        let whitened_reading = if under_way && !self.fault_in_force() {
+        let whitened_reading = if (under_way || scan) && !self.fault_in_force() {
             self.change.whitened_search()
         } else {
             None
         };
         self.reading_whitened = whitened_reading.is_some();
+        self.reading_scanned = !under_way;
         self.reading = if under_way {
             whitened_reading.or_else(|| self.change.evaluate())
         } else {
-            None
+            whitened_reading
         };
         self.whitened = self.reading.and_then(|r| {
             let gain_or_offset = matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset);
@@ -516,6 +536,9 @@ impl Diagnoser {
         }
         let data_alarm = self.data_alarm();
         let named = self.naming_reading().map(|r| r.actuator);
+        if let Some(k) = named {
+            self.actuators[k].data_named_at = t;
+        }
         let from = out.len();
         for j in 0..self.actuators.len() {
             self.gate(t, j, out);

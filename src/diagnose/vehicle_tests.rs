@@ -576,3 +576,62 @@ fn x1_a_decision_out_of_the_flight_envelope_is_marked_as_a_crash() {
     let flying = run(false);
     assert!(!flying.in_crash && !flying.detail.unwrap().contains("X1"));
 }
+
+/// Plane, aileron commanded about 0.1 ± 0.08, its gain `gain` from 16 s, which the filters do
+/// not show at all (their estimates stay healthy, so no CUSUM rises and nothing is under way).
+fn plane_aileron_gain(gain: f64, to: f64) -> Flight {
+    let mut f = Flight::new("plane");
+    let u = |t: f64| {
+        vec![
+            0.1 + 0.08 * (t * 3.1).sin(),
+            0.05 * (t * 2.0).sin(),
+            0.02 * (t * 1.7).sin(),
+        ]
+    };
+    let change =
+        move |t: f64, u: &[f64]| (0usize, if t >= 16.0 { (gain - 1.0) * u[0] } else { 0.0 });
+    f.fly(
+        0.0,
+        to,
+        u,
+        |_| vec![healthy(0.02); 3],
+        Some(&change as Change),
+    );
+    f
+}
+
+#[test]
+fn d2_the_data_read_while_nothing_is_under_way_and_a_fault_is_what_the_classes_define() {
+    // A loss to 0.75: the data, read every `SCAN_S` though no filter statistic moves, name it
+    // clearly, and a gain under 1 - loe_tau is a fault (the gain statistic's threshold would
+    // need a loss to 0.62).
+    let f = plane_aileron_gain(0.75, 22.0);
+    let faults = f.events(Event::Fault);
+    assert_eq!(faults.len(), 1, "{:?}", f.decisions);
+    assert_eq!(faults[0].rule, Some(Rule::F3));
+    assert_eq!(faults[0].actuator.as_deref(), Some("aileron"));
+    assert!(faults[0].t < 19.0, "{}", faults[0].t);
+    // A gain above one is no class: read as clearly, it decides nothing.
+    let f = plane_aileron_gain(1.3, 22.0);
+    assert!(f.events(Event::Fault).is_empty(), "{:?}", f.decisions);
+}
+
+#[test]
+fn r1_a_fault_the_data_decided_stands_until_they_have_not_named_it_for_clear_s() {
+    let mut f = plane_aileron_gain(0.75, 20.0);
+    assert_eq!(f.events(Event::Fault).len(), 1, "{:?}", f.decisions);
+    // The store is lost (a long telemetry hole): the data name nothing from 20 s on.
+    f.d.residual_gap();
+    let n = f.n();
+    f.fly(
+        20.0,
+        25.0,
+        dithered(n, 0.1, 0.08),
+        |_| vec![healthy(0.02); 3],
+        None,
+    );
+    let cleared = f.events(Event::Cleared);
+    assert_eq!(cleared.len(), 1, "{:?}", f.decisions);
+    let t = cleared[0].t;
+    assert!((21.9..22.2).contains(&t), "cleared at {t}");
+}

@@ -10,7 +10,9 @@
 //! caller runs the cases (in parallel) and prints.
 
 use super::EvalError;
-use super::oracle::{Alternative, DETECTABLE_LAMBDA, KindOracle, Oracle, OracleNoise};
+use super::oracle::{
+    Alternative, DETECTABLE_LAMBDA, IsolationOracle, KindOracle, Oracle, OracleNoise,
+};
 use super::vehicle::sim_config;
 use crate::diagnose::vehicle::{Decision, Event};
 use crate::estimate::vehicle::AhcEstimate;
@@ -153,14 +155,18 @@ pub struct Case {
 
 /// Which cases: all, or the fast subset CI runs (one seed, losses of 0.5 and biases of +0.15
 /// in steady flight with the built-in weather, two healthy minutes per vehicle).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct MatrixSpec {
     pub seeds: u64,
+    /// The first seed (seeds run `first_seed..first_seed + seeds`).
+    pub first_seed: u64,
     pub healthy_s: f64,
     pub fast: bool,
+    /// Only these vehicles ([`VEHICLES`]' names); empty: all.
+    pub vehicles: Vec<String>,
 }
 
-/// The cases of `spec`, in a fixed order. Seeds run from 1.
+/// The cases of `spec`, in a fixed order.
 pub fn cases(spec: &MatrixSpec) -> Result<Vec<Case>, EvalError> {
     let (kinds, flights, weathers): (&[FaultKind], &[Flight], &[Weather]) = if spec.fast {
         (
@@ -175,11 +181,20 @@ pub fn cases(spec: &MatrixSpec) -> Result<Vec<Case>, EvalError> {
             &[Weather::Builtin, Weather::Rough],
         )
     };
+    if let Some(v) = (spec.vehicles.iter()).find(|v| !VEHICLES.contains(&v.as_str())) {
+        return Err(EvalError::Sim(
+            v.clone(),
+            format!("not a matrix vehicle (one of {})", VEHICLES.join(", ")),
+        ));
+    }
     let mut out = vec![];
     for vehicle in VEHICLES {
+        if !spec.vehicles.is_empty() && !spec.vehicles.iter().any(|v| v == vehicle) {
+            continue;
+        }
         let profile = Profile::resolve(vehicle)
             .map_err(|e| EvalError::Sim(vehicle.to_string(), e.to_string()))?;
-        for seed in 1..=spec.seeds {
+        for seed in spec.first_seed..spec.first_seed + spec.seeds {
             for &flight in flights {
                 for &weather in weathers {
                     let case = |fault, duration_s| Case {
@@ -275,6 +290,10 @@ pub struct CaseResult {
     /// detectable ([`DETECTABLE_LAMBDA`]).
     pub oracle_lambda: Option<f64>,
     pub detectable: Option<bool>,
+    /// The isolation oracle's non-centrality at the same time ([`IsolationOracle`], the fault
+    /// against the closest change of another actuator), and whether that names the actuator.
+    pub isolation_lambda: Option<f64>,
+    pub isolable: Option<bool>,
     /// Fault decisions before the onset (any actuator; all of a healthy flight's), and each
     /// one's actuator and rule.
     pub false_before_onset: u32,
@@ -361,7 +380,6 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
         _ => 0.0,
     };
     let named = case.named(trim)?;
-    let err = |e: String| EvalError::Sim(case.label(), e);
     let (cfg, _) = sim_config(&named, case.seed)?;
     let truth = cfg
         .profile
@@ -387,13 +405,12 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
     let mut oracle = Oracle::new(truth.clone(), noise);
     let l = vehicle.actuators.len();
     let mut kind_oracle = target.map(|j| KindOracle::new(truth.clone(), noise, j, l));
+    let mut isolation_oracle = target.map(|j| IsolationOracle::new(truth.clone(), noise, j, l));
+    let mut isolation_at_mark = None;
     let alternatives = case
         .fault
         .as_ref()
         .map_or(&[][..], |(_, k)| k.alternatives(trim));
-    let mut sim = VehicleSim::new(cfg).map_err(err)?;
-    let mut enc = SimTelemetry::new(&vehicle);
-    let mut monitor = Monitor::new(PipelineConfig::default());
     let mut sink = Collect {
         target,
         decisions: vec![],
@@ -401,30 +418,73 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
         first_estimate: None,
         last_estimate: 0.0,
     };
-    let mut msgs = Vec::with_capacity(16);
-    let mut seq = 0u8;
     let mut lambda_at_mark = None;
     let mut deviation = [0.0; crate::model::MAX_ACTUATORS];
-    let mut prev = sim.step();
     let mut truth_at: Vec<(f64, f64, f64)> = vec![];
     let mut class_lambda_at: Vec<f64> = vec![];
+    fly(
+        &named,
+        case.seed,
+        PipelineConfig::default(),
+        &mut sink,
+        |prev| {
+            for (j, dev) in deviation.iter_mut().enumerate().take(l) {
+                *dev = (prev.gamma[j] - 1.0) * prev.u[j] + prev.delta[j];
+            }
+            oracle.step(&deviation[..l]);
+            if let (Some(j), Some(o)) = (target, isolation_oracle.as_mut()) {
+                o.step(deviation[j], &prev.u[..l], prev.t >= ONSET_S);
+            }
+            if lambda_at_mark.is_none() && prev.t >= ONSET_S + NAME_WITHIN_S {
+                lambda_at_mark = Some(oracle.lambda());
+                isolation_at_mark = isolation_oracle.as_ref().map(IsolationOracle::lambda);
+            }
+            if let (Some(j), Some(k)) = (target, kind_oracle.as_mut()) {
+                truth_at.push((prev.t + BOOT_OFFSET_S, prev.gamma[j], prev.delta[j]));
+                k.step(deviation[j], prev.u[j], prev.t >= ONSET_S);
+                let sep = (alternatives.iter())
+                    .map(|&a| k.lambda_from(a))
+                    .fold(f64::INFINITY, f64::min);
+                class_lambda_at.push(sep);
+            }
+        },
+    )?;
+    let mut result = score(
+        case,
+        target.is_some(),
+        lambda_at_mark,
+        &sink,
+        &truth_at,
+        &class_lambda_at,
+    );
+    result.isolation_lambda = isolation_at_mark;
+    result.isolable = isolation_at_mark.map(|l| l >= DETECTABLE_LAMBDA);
+    Ok(result)
+}
+
+/// Fly `named` with `seed` through the pipeline `replay` runs: the simulator's telemetry as
+/// the MAVLink messages an autopilot sends, into a [`Monitor`] with `config`. `on_sample` sees
+/// each sample (with its truth) before its messages are sent.
+fn fly(
+    named: &NamedScenario,
+    seed: u64,
+    config: PipelineConfig,
+    sink: &mut dyn Sink,
+    mut on_sample: impl FnMut(&crate::sim::vehicle::VehicleSample),
+) -> Result<(), EvalError> {
+    let err = |e: String| EvalError::Sim(named.name.clone(), e);
+    let (cfg, _) = sim_config(named, seed)?;
+    let vehicle = cfg.profile.clone();
+    let l = vehicle.actuators.len();
+    let mut sim = VehicleSim::new(cfg).map_err(err)?;
+    let mut enc = SimTelemetry::new(&vehicle);
+    let mut monitor = Monitor::new(config);
+    let mut msgs = Vec::with_capacity(16);
+    let mut seq = 0u8;
+    let mut prev = sim.step();
     for _ in 1..named.scenario.steps() {
         let next = sim.step();
-        for (j, dev) in deviation.iter_mut().enumerate().take(l) {
-            *dev = (prev.gamma[j] - 1.0) * prev.u[j] + prev.delta[j];
-        }
-        oracle.step(&deviation[..l]);
-        if lambda_at_mark.is_none() && prev.t >= ONSET_S + NAME_WITHIN_S {
-            lambda_at_mark = Some(oracle.lambda());
-        }
-        if let (Some(j), Some(k)) = (target, kind_oracle.as_mut()) {
-            truth_at.push((prev.t + BOOT_OFFSET_S, prev.gamma[j], prev.delta[j]));
-            k.step(deviation[j], prev.u[j], prev.t >= ONSET_S);
-            let sep = (alternatives.iter())
-                .map(|&a| k.lambda_from(a))
-                .fold(f64::INFINITY, f64::min);
-            class_lambda_at.push(sep);
-        }
+        on_sample(&prev);
         msgs.clear();
         enc.sample_messages(&prev, &next.u[..l], &mut msgs);
         for m in msgs.drain(..) {
@@ -437,19 +497,12 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
                 msg: m,
             };
             seq = seq.wrapping_add(1);
-            monitor.on_frame(&frame, &mut sink);
+            monitor.on_frame(&frame, sink);
         }
         prev = next;
     }
-    monitor.finish(&mut sink);
-    Ok(score(
-        case,
-        target.is_some(),
-        lambda_at_mark,
-        &sink,
-        &truth_at,
-        &class_lambda_at,
-    ))
+    monitor.finish(sink);
+    Ok(())
 }
 
 fn score(
@@ -532,6 +585,8 @@ fn score(
         case: case.clone(),
         oracle_lambda: lambda.filter(|_| faulty),
         detectable: lambda.filter(|_| faulty).map(|l| l >= DETECTABLE_LAMBDA),
+        isolation_lambda: None,
+        isolable: None,
         false_before_onset,
         false_decisions,
         first,

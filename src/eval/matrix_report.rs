@@ -14,6 +14,10 @@ pub struct ReportRow {
     /// Detectable cases whose first decision after the onset names the faulty actuator within
     /// `NAME_WITHIN_S`.
     pub named_right: usize,
+    /// Of the detectable cases: those whose actuator the isolation oracle tells from every
+    /// other's change, and of them the named right.
+    pub isolable: usize,
+    pub named_right_isolable: usize,
     pub delay_p50_s: Option<f64>,
     pub delay_p90_s: Option<f64>,
     /// Of the named-right cases: the class right, and gamma and delta both within 0.1.
@@ -96,6 +100,8 @@ fn row(vehicle: &str, kind: &str, rows: &[&CaseResult]) -> ReportRow {
             continue;
         }
         out.detectable += 1;
+        let isolable = r.isolable == Some(true);
+        out.isolable += usize::from(isolable);
         let right = r
             .first
             .as_ref()
@@ -104,6 +110,7 @@ fn row(vehicle: &str, kind: &str, rows: &[&CaseResult]) -> ReportRow {
             continue;
         }
         out.named_right += 1;
+        out.named_right_isolable += usize::from(isolable);
         delays.extend(r.named_after_s);
         out.class_right += usize::from(r.class_right == Some(true));
         if r.class_separable == Some(true) {

@@ -106,8 +106,10 @@ fn scoring_of_a_hand_made_run() {
 fn the_fast_subset_and_the_whole_matrix() {
     let spec = |fast| MatrixSpec {
         seeds: 2,
+        first_seed: 1,
         healthy_s: 60.0,
         fast,
+        vehicles: vec![],
     };
     let all = cases(&spec(false)).unwrap();
     // 21 actuators × 6 kinds + 5 healthy, × 2 flights × 2 weathers × 2 seeds.

@@ -310,6 +310,81 @@ impl KindOracle {
     }
 }
 
+/// Signatures the isolation oracle follows: the fault, and a gain change and an offset of
+/// every other actuator.
+const ISOLATION_K: usize = 1 + 2 * (crate::model::MAX_ACTUATORS - 1);
+
+/// How well the best detector there is could tell which actuator is faulty: the oracle above,
+/// for the fault's signature and, for every other actuator, any change of its gain and offset
+/// from the same onset (two parameters, their best sizes known). The closest other actuator
+/// leaves `lambda_iso = G_ss - gᵀ A⁻¹ g` of the fault's non-centrality (`A` the Gram matrix of
+/// that actuator's two alternatives, `g` their products with the fault): where it is under
+/// [`DETECTABLE_LAMBDA`], no monitor can be asked to name the actuator (a hexacopter's motor
+/// giving more thrust against its opposite giving less, told apart by a_z alone).
+#[derive(Debug, Clone)]
+pub struct IsolationOracle {
+    matched: Matched<ISOLATION_K>,
+    actuator: usize,
+    signals: [Vec<f64>; ISOLATION_K],
+}
+
+impl IsolationOracle {
+    /// For actuator `actuator` of `actuators` (at most `MAX_ACTUATORS`).
+    pub fn new(truth: RateParams, noise: OracleNoise, actuator: usize, actuators: usize) -> Self {
+        Self {
+            matched: Matched::new(truth, noise),
+            actuator,
+            signals: std::array::from_fn(|_| vec![0.0; actuators]),
+        }
+    }
+
+    /// Signature slot of other actuator `k`'s gain (its offset is the next one).
+    fn slot(&self, k: usize) -> usize {
+        1 + 2 * if k < self.actuator { k } else { k - 1 }
+    }
+
+    /// One simulator step: the faulty actuator's true deviation, every actuator's command, and
+    /// whether the fault has begun (the alternatives start with it).
+    pub fn step(&mut self, deviation: f64, commands: &[f64], begun: bool) {
+        let j = self.actuator;
+        self.signals[0][j] = deviation;
+        for (k, &u) in commands.iter().enumerate().take(self.signals[0].len()) {
+            if k == j {
+                continue;
+            }
+            let a = self.slot(k);
+            self.signals[a][k] = if begun { u } else { 0.0 };
+            self.signals[a + 1][k] = if begun { 1.0 } else { 0.0 };
+        }
+        let refs: [&[f64]; ISOLATION_K] = std::array::from_fn(|i| self.signals[i].as_slice());
+        self.matched.step(&refs);
+    }
+
+    /// What of the fault's non-centrality the closest other actuator's change leaves.
+    pub fn lambda(&self) -> f64 {
+        let g = &self.matched.gram;
+        let l = self.signals[0].len();
+        let mut least = g[0][0];
+        for k in (0..l).filter(|&k| k != self.actuator) {
+            let (a, b) = (self.slot(k), self.slot(k) + 1);
+            let (aa, bb, ab) = (g[a][a], g[b][b], g[a][b]);
+            let (sa, sb) = (g[0][a], g[0][b]);
+            let det = aa * bb - ab * ab;
+            let explained = if det > 1e-12 * aa * bb {
+                (bb * sa * sa - 2.0 * ab * sa * sb + aa * sb * sb) / det
+            } else if aa >= bb && aa > 0.0 {
+                sa * sa / aa
+            } else if bb > 0.0 {
+                sb * sb / bb
+            } else {
+                0.0
+            };
+            least = least.min((g[0][0] - explained).max(0.0));
+        }
+        least
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -454,5 +529,47 @@ mod tests {
         let total = gain.matched.gram[0][0];
         assert!((total - detect.lambda()).abs() < 1e-9 * total);
         assert!(gain.lambda_from(Alternative::Offset) <= total);
+    }
+
+    /// The isolation oracle: an actuator whose effect another's repeats (opposite sign) cannot
+    /// be told from it; one whose effect no other shares is told apart as well as it is
+    /// detected; a third actuator sharing part of the effect leaves the part it does not share.
+    #[test]
+    fn isolation_is_what_no_other_actuator_can_explain() {
+        let (mut truth, noise) = two_actuators();
+        let run = |truth: &RateParams, l: usize, phase: f64| {
+            let mut iso = IsolationOracle::new(truth.clone(), noise, 1, l);
+            let mut detect = Oracle::new(truth.clone(), noise);
+            for k in 0..300 {
+                let begun = k >= 50;
+                let u: Vec<f64> = (0..l)
+                    .map(|j| 0.5 + 0.1 * (k as f64 * 0.1 + phase * j as f64).sin())
+                    .collect();
+                let deviation = if begun { -0.3 * u[1] } else { 0.0 };
+                iso.step(deviation, &u, begun);
+                let mut dev = vec![0.0; l];
+                dev[1] = deviation;
+                detect.step(&dev);
+            }
+            (iso.lambda(), detect.lambda())
+        };
+        // Actuators 0 and 1 on separate axes: nothing of 1's fault is 0's.
+        truth.effectiveness = vec![[10.0, 0.0, 0.0], [0.0, 20.0, -5.0]];
+        let (iso, lambda) = run(&truth, 2, 1.0);
+        assert!(
+            lambda > 100.0 && (iso - lambda).abs() < 1e-9 * lambda,
+            "{iso} {lambda}"
+        );
+        // Actuator 0 the mirror of 1 with the same command: its gain repeats 1's gain change
+        // exactly; with another command, only the part along its command and a constant.
+        truth.effectiveness = vec![[0.0, -20.0, 5.0], [0.0, 20.0, -5.0]];
+        let (iso, lambda) = run(&truth, 2, 0.0);
+        assert!(iso < 1e-9 * lambda, "{iso} {lambda}");
+        let (iso, lambda) = run(&truth, 2, 1.0);
+        assert!(iso > 1e-3 * lambda && iso < 0.5 * lambda, "{iso} {lambda}");
+        // A third actuator sharing 1's pitch but not its yaw: what is left is yaw's part.
+        truth.effectiveness = vec![[10.0, 0.0, 0.0], [0.0, 20.0, -5.0], [0.0, 20.0, 0.0]];
+        let (iso, lambda) = run(&truth, 3, 1.0);
+        assert!(iso > 0.0 && iso < 0.5 * lambda, "{iso} {lambda}");
     }
 }

@@ -15,8 +15,8 @@ fn secs(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.2}"))
 }
 
-/// One line per row: detection among the oracle-detectable cases (named right within 5 s),
-/// its delays, class and estimates of those named right (`sep%`: the class right among those
+/// One line per row: detection among the oracle-detectable cases (named right within 5 s; `iso%`
+/// among those the isolation oracle can also name), its delays, class and estimates of those named right (`sep%`: the class right among those
 /// whose class the class oracle separates from the other kinds), wrong-actuator decisions on cases the
 /// oracle cannot detect, false decisions before the onsets and in healthy flights (and per
 /// healthy hour).
@@ -24,12 +24,13 @@ pub fn render(rows: &[ReportRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>5} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
         "vehicle",
         "fault",
         "cases",
         "detec",
         "named%",
+        "iso%",
         "p50_s",
         "p90_s",
         "class%",
@@ -49,12 +50,13 @@ pub fn render(rows: &[ReportRow]) -> String {
         };
         let _ = writeln!(
             s,
-            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>5} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
             r.vehicle,
             r.kind,
             r.cases,
             r.detectable,
             pct(r.named_right, r.detectable),
+            pct(r.named_right_isolable, r.isolable),
             secs(r.delay_p50_s),
             secs(r.delay_p90_s),
             pct(r.class_right, r.named_right),
