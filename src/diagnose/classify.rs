@@ -174,7 +174,8 @@ impl Diagnoser {
     /// excluding the healthy value, and the other is not (its bounds reach within its
     /// tolerance); any other change (both beyond, or a gain above 1) is mixed: a loss only if
     /// one could make it (the output moved toward zero by no more than the command), else a
-    /// bias. `None` while the bounds tell nothing. Never stuck:
+    /// bias (a range output's deviation toward zero is always a loss: it cannot go below zero).
+    /// `None` while the bounds tell nothing. Never stuck:
     /// the filters have no stuck state, and a gain swinging through zero while it converges
     /// looks like one; only the data tell a stuck output (C1).
     pub(super) fn filter_class(&self, j: usize) -> Option<(FaultClass, bool)> {
@@ -194,8 +195,11 @@ impl Diagnoser {
         if !(gain_off || bias_off) {
             return None;
         }
+        // A motor's or throttle's output cannot go below zero: a deviation toward zero beyond
+        // the command is a loss the estimate overstates, not an offset.
         let off = st.channels[0].e;
-        let loss = off * st.u.mean.signum() < 0.0 && off.abs() <= st.u.mean.abs() && e.gamma < 1.0;
+        let within = off.abs() <= st.u.mean.abs() || !self.is_angle[j];
+        let loss = off * st.u.mean.signum() < 0.0 && within && e.gamma < 1.0;
         let class = if loss {
             FaultClass::LossOfEffectiveness
         } else {

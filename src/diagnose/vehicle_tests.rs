@@ -635,3 +635,32 @@ fn r1_a_fault_the_data_decided_stands_until_they_have_not_named_it_for_clear_s()
     let t = cleared[0].t;
     assert!((21.9..22.2).contains(&t), "cleared at {t}");
 }
+
+#[test]
+fn c2_a_motors_output_overstated_below_zero_is_a_loss() {
+    // Quad X, motor 2 read from 8 s at gamma -0.6 and delta +0.1 (both beyond their
+    // tolerances: the mixed fallback) at a command about 0.5: the output read is -0.2, a
+    // motor's cannot be; the filters overstate a loss, which is what it is. A surface's
+    // output may cross zero: the plane's elevator at 0.1 read at gamma -0.6, delta -0.05 has
+    // moved by twice its command through zero, a bias.
+    let run = |profile: &str, mean: f64, delta: f64| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if t >= 8.0 {
+                e[1] = estimate(-0.6, 0.1, delta, 0.01);
+            }
+            e
+        };
+        f.fly(0.0, 14.0, dithered(n, mean, 0.04), est, None);
+        let fault = f.events(Event::Fault);
+        assert_eq!(fault.len(), 1, "{:?}", f.decisions);
+        fault[0].class
+    };
+    assert_eq!(
+        run("quad-x", 0.5, 0.1),
+        Some(FaultClass::LossOfEffectiveness)
+    );
+    assert_eq!(run("plane", 0.1, -0.05), Some(FaultClass::Bias));
+}
