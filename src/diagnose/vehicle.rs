@@ -195,6 +195,8 @@ pub struct Diagnoser {
     envelope_rad: f64,
     outside: Option<(f64, String)>,
     crashing: bool,
+    /// Since when the vehicle has been back inside the envelope.
+    inside_since: Option<f64>,
 }
 
 impl Diagnoser {
@@ -253,17 +255,26 @@ impl Diagnoser {
             },
             outside: None,
             crashing: false,
+            inside_since: None,
         }
     }
 
     /// Rule X1, before each `update`: the attitude and, where measured, the vertical specific
-    /// force (m/s², about -9.8 in level flight).
+    /// force (m/s², about -9.8 in level flight). Once out of the envelope for `ENVELOPE_S` the
+    /// vehicle is in a crash until it has been back inside for `clear_s`: a tumbling vehicle
+    /// passes through level attitudes on its way round.
     pub fn envelope(&mut self, t: f64, attitude: [f64; 3], az: Option<f64>) {
         let lean = attitude[0].abs().max(attitude[1].abs());
         let falling = az.is_some_and(|a| a.abs() < FREE_FALL_G * 9.80665);
         if lean <= self.envelope_rad && !falling {
-            self.outside = None;
-        } else if self.outside.is_none() {
+            let back = *self.inside_since.get_or_insert(t);
+            if !self.crashing || t - back >= self.params.clear_s {
+                (self.outside, self.crashing) = (None, false);
+            }
+            return;
+        }
+        self.inside_since = None;
+        if self.outside.is_none() {
             let why = if lean > self.envelope_rad {
                 format!(
                     "roll {:.0}°, pitch {:.0}°",
@@ -275,7 +286,7 @@ impl Diagnoser {
             };
             self.outside = Some((t, why));
         }
-        self.crashing = self
+        self.crashing |= self
             .outside
             .as_ref()
             .is_some_and(|(t0, _)| t - t0 >= ENVELOPE_S);

@@ -664,3 +664,39 @@ fn c2_a_motors_output_overstated_below_zero_is_a_loss() {
     );
     assert_eq!(run("plane", 0.1, -0.05), Some(FaultClass::Bias));
 }
+
+#[test]
+fn x1_a_tumble_through_level_is_still_a_crash_until_it_has_been_level_for_clear_s() {
+    // Quad X, rolled past 70° from 7.0 s to 7.4 s, level again from 7.4 s (a tumble passes
+    // through level): motor 2 at gamma 0.6 from `onset`, decided by F2 3 s later, is decided
+    // in the crash when the vehicle has been level for less than clear_s, not afterwards.
+    let run = |onset: f64| {
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
+        let mut out = vec![];
+        let mut all = vec![];
+        for k in 0..800 {
+            let t = k as f64 * DT;
+            let mut e = vec![healthy(0.02); 4];
+            if t >= onset {
+                e[1] = estimate(0.6, 0.05, 0.0, 0.02);
+            }
+            let roll = if (7.0..7.4).contains(&t) {
+                70f64.to_radians()
+            } else {
+                0.0
+            };
+            d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
+            d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
+            all.append(&mut out);
+        }
+        all.into_iter().find(|x| x.event == Event::Fault).unwrap()
+    };
+    let tumbling = run(5.5);
+    assert!(
+        (7.4..9.4).contains(&tumbling.t) && tumbling.in_crash,
+        "{tumbling:?}"
+    );
+    let recovered = run(10.0);
+    assert!(!recovered.in_crash, "{recovered:?}");
+}
