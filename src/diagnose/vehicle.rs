@@ -53,8 +53,9 @@ const CHANGE_MIN_S: f64 = 0.2;
 const MAX_HOLE_S: f64 = 1.0;
 /// Memory of the residual's learned colour (s).
 const COLOUR_MEMORY_S: f64 = 60.0;
-/// While nothing is under way, the data are read this often (s).
-const SCAN_S: f64 = 0.1;
+/// While nothing is under way, the data are read this often (s): a quarter of `CLASS_MIN_S`,
+/// the least a change lasts before the data alarm on it.
+const SCAN_S: f64 = 0.25;
 /// How long a filter alarm waits for the data before F2 decides it (s). The change test needs
 /// `CHANGE_MIN_S` to fit and about a second to be clear; a filters' misreading at a fault's
 /// onset ends within their alarm plus `clear_s`.
