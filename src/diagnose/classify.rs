@@ -175,9 +175,8 @@ impl Diagnoser {
     /// tolerance); any other change (both beyond, or a gain above 1) is mixed: a loss only if
     /// one could make it (the output moved toward zero by no more than the command), else a
     /// bias (a range output's deviation toward zero is always a loss: it cannot go below zero).
-    /// `None` while the bounds tell nothing. Never stuck:
-    /// the filters have no stuck state, and a gain swinging through zero while it converges
-    /// looks like one; only the data tell a stuck output (C1).
+    /// A gain bounded within `stuck_gamma` of zero with an offset beyond its tolerance is
+    /// stuck. `None` while the bounds tell nothing.
     pub(super) fn filter_class(&self, j: usize) -> Option<(FaultClass, bool)> {
         let p = &self.params;
         let st = &self.actuators[j];
@@ -191,6 +190,16 @@ impl Diagnoser {
         }
         if bias_off && !gain_off && gain_held {
             return Some((FaultClass::Bias, false));
+        }
+        // A gain whose bounds lie within `stuck_gamma` of zero with an offset beyond its
+        // tolerance: the output no longer follows the command (stuck, by the class
+        // definitions). Not a gain passing through zero on its way: the command has moved
+        // (`separable`) and the whole bounds are there. A range output's offset must be inside
+        // its range: at or below zero it is a total loss.
+        let near_zero = -p.stuck_gamma < e.gamma_lo && e.gamma_hi < p.stuck_gamma;
+        let inside = self.is_angle[j] || e.delta_lo > p.bias_tau;
+        if near_zero && bias_off && inside {
+            return Some((FaultClass::Stuck, false));
         }
         if !(gain_off || bias_off) {
             return None;

@@ -666,6 +666,37 @@ fn c2_a_motors_output_overstated_below_zero_is_a_loss() {
 }
 
 #[test]
+fn c2_a_gain_bounded_near_zero_with_an_offset_is_stuck() {
+    // Actuator 2 read from 8 s at gamma 0.02 ± 0.1 with an offset while its command swings:
+    // the output no longer follows it. The plane's elevator (command about 0.1) with delta
+    // +0.12: stuck. A quad's motor (about 0.5) with delta +0.3 is stuck too; with delta -0.1
+    // its output would be below zero, a total loss. The same gain with bounds reaching 0.3
+    // (a gain passing through zero) is not told stuck.
+    let run = |profile: &str, mean: f64, g_half: f64, delta: f64| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if t >= 8.0 {
+                e[1] = estimate(0.02, g_half, delta, 0.01);
+            }
+            e
+        };
+        f.fly(0.0, 14.0, dithered(n, mean, 0.04), est, None);
+        let fault = f.events(Event::Fault);
+        assert_eq!(fault.len(), 1, "{:?}", f.decisions);
+        fault[0].class
+    };
+    assert_eq!(run("plane", 0.1, 0.1, 0.12), Some(FaultClass::Stuck));
+    assert_eq!(run("quad-x", 0.5, 0.1, 0.3), Some(FaultClass::Stuck));
+    assert_eq!(
+        run("quad-x", 0.5, 0.1, -0.1),
+        Some(FaultClass::LossOfEffectiveness)
+    );
+    assert_ne!(run("plane", 0.1, 0.3, 0.12), Some(FaultClass::Stuck));
+}
+
+#[test]
 fn x1_a_tumble_through_level_is_still_a_crash_until_it_has_been_level_for_clear_s() {
     // Quad X, rolled past 70° from 7.0 s to 7.4 s, level again from 7.4 s (a tumble passes
     // through level): motor 2 at gamma 0.6 from `onset`, decided by F2 3 s later, is decided
