@@ -241,19 +241,57 @@ impl Diagnoser {
         }
     }
 
-    /// Actuator `j`'s fault in force as the change test identifies it, for the filters'
-    /// identification (`VehicleFilters::hold_class`): when the class in force is a loss, a bias
-    /// or a stuck output, the fault is alone, and the data fit that kind clearly, the changed
-    /// coefficient from the fit and the other at its healthy value within the tolerance that
-    /// tells the class (as 3σ).
+    /// Actuator `j`'s fault in force as identified for the filters
+    /// (`VehicleFilters::hold_class`), when it is alone: the data's fit of it
+    /// ([`Self::data_identified`]), else a range output's offset by elimination
+    /// ([`Self::offset_by_elimination`]).
     pub fn identified(&self, j: usize) -> Option<Identified> {
-        let p = &self.params;
         let class = self.active(j)?;
-        if self.actuators[j].class_mixed
-            || (0..self.actuators.len()).any(|k| k != j && self.active(k).is_some())
-        {
+        if (0..self.actuators.len()).any(|k| k != j && self.active(k).is_some()) {
             return None;
         }
+        let data = if self.actuators[j].class_mixed {
+            None
+        } else {
+            self.data_identified(j, class)
+        };
+        data.or_else(|| self.offset_by_elimination(j, class))
+    }
+    /// A motor's or throttle's bias the data do not fit clearly: at its operating point a gain
+    /// above one and an offset up give the same output, and no fault class has a gain above
+    /// one, so an output above the healthy model's there is the offset it reads (the class
+    /// says bias, C2's mixed fallback). Identified as that offset, with the deviation's spread,
+    /// the gain at one within the tolerance that tells the class; without it the MIT-UKF,
+    /// whose prior on a range output's offset is narrow, shows the offset as a gain.
+    fn offset_by_elimination(&self, j: usize, class: FaultClass) -> Option<Identified> {
+        let p = &self.params;
+        let st = &self.actuators[j];
+        if class != FaultClass::Bias || self.is_angle[j] || st.class_from_data {
+            return None;
+        }
+        let e = st.channels[0].last;
+        let u = st.u.mean;
+        let [gg, gd, dd] = e.block;
+        let delta = (e.gamma - 1.0) * u + e.delta;
+        let var = u * u * gg + 2.0 * u * gd + dd;
+        if !(delta > p.bias_tau && var.is_finite() && var > 0.0) {
+            return None;
+        }
+        Some(Identified {
+            kind: IdentifiedKind::Offset,
+            gamma: 1.0,
+            gamma_std: p.loe_tau / 3.0,
+            delta,
+            delta_std: var.sqrt(),
+            tolerance: p.bias_tau,
+        })
+    }
+    /// The data's identification of actuator `j`'s fault (class `class`): when the class is
+    /// a loss, a bias or a stuck output and the data fit that kind clearly, the changed
+    /// coefficient from the fit and the other at its healthy value within the tolerance that
+    /// tells the class (as 3σ).
+    fn data_identified(&self, j: usize, class: FaultClass) -> Option<Identified> {
+        let p = &self.params;
         let r = self.reading.filter(|r| r.actuator == j)?;
         let fit = self.change.whitened_gain_or_offset(j, r.samples);
         let whitened = fit.filter(|_| r.kind != ChangeKind::Stuck);

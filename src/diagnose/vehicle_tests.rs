@@ -731,3 +731,33 @@ fn x1_a_tumble_through_level_is_still_a_crash_until_it_has_been_level_for_clear_
     let recovered = run(10.0);
     assert!(!recovered.in_crash, "{recovered:?}");
 }
+
+#[test]
+fn identification_a_motors_bias_the_filters_read_as_a_gain_above_one_is_the_offset() {
+    // Actuator 2 read from 8 s at gamma 1.3 (bounds ±0.05), offset 0, command about 0.5, and
+    // nothing in the data: decided on the filters' mixed fallback, a bias. On a quad's motor no
+    // class has a gain above one, so the fault is identified as the offset its output shows
+    // at the operating point (0.3 × 0.5), gain one. A plane's surface is not (an angle output
+    // has no such elimination: its offset and gain are the data's to tell).
+    let run = |profile: &str| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if t >= 8.0 {
+                e[1] = estimate(1.3, 0.05, 0.0, 0.01);
+            }
+            e
+        };
+        f.fly(0.0, 14.0, dithered(n, 0.5, 0.03), est, None);
+        let fault = f.events(Event::Fault);
+        assert_eq!(fault.len(), 1, "{:?}", f.decisions);
+        assert_eq!(fault[0].class, Some(FaultClass::Bias), "{:?}", fault[0]);
+        f.d.identified(1)
+    };
+    let id = run("quad-x").expect("the motor's offset is identified");
+    assert_eq!(id.kind, IdentifiedKind::Offset);
+    assert_eq!(id.gamma, 1.0);
+    assert!((id.delta - 0.15).abs() < 0.01, "{id:?}");
+    assert_eq!(run("plane"), None);
+}
