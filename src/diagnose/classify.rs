@@ -216,6 +216,16 @@ impl Diagnoser {
         };
         Some((class, true))
     }
+    /// Whether the MIT-UKF's bounds keep actuator `j` outside what the classes call healthy:
+    /// its gain's bounds beyond `loe_tau` of 1 or its offset's beyond `bias_tau` of 0 (bounds
+    /// too wide to tell, or not finite, show nothing).
+    pub(super) fn filter_shows_fault(&self, j: usize) -> bool {
+        let p = &self.params;
+        let e = self.actuators[j].channels[0].last;
+        let gain_off = e.gamma_hi < 1.0 - p.loe_tau || e.gamma_lo > 1.0 + p.loe_tau;
+        let bias_off = e.delta_hi < -p.bias_tau || e.delta_lo > p.bias_tau;
+        gain_off || bias_off
+    }
     /// C1, else C2 when separable, else C3: the class, its rule, whether it is the mixed
     /// fallback, and why there is none.
     pub(super) fn classify(&self, j: usize) -> (FaultClass, Rule, bool, Option<NoClass>) {
@@ -268,6 +278,25 @@ impl Diagnoser {
         let st = &self.actuators[j];
         if class != FaultClass::Bias || self.is_angle[j] || st.class_from_data {
             return None;
+        }
+        // Not against the data: a gain they fit clearly better than an offset, or a gain and
+        // an offset that together fit clearly better than one kind (the pair's other
+        // coefficient beyond the class's tolerance), is no lone offset.
+        if let Some(r) = self.reading.filter(|r| r.actuator == j) {
+            let fit = self.change.whitened_gain_or_offset(j, r.samples);
+            let (kind, margin, mixed) = fit.map_or(
+                (
+                    r.kind,
+                    r.margin_over(r.next_kind_drop),
+                    -r.margin_over(r.mixed_drop),
+                ),
+                |f| (f.kind, f.margin, f.mixed_margin),
+            );
+            let other_kind = kind != ChangeKind::Offset && margin >= DATA_MARGIN;
+            let pair = mixed >= DATA_MARGIN && !fit.is_some_and(|f| self.pair_keeps_kind(&f));
+            if other_kind || pair {
+                return None;
+            }
         }
         let e = st.channels[0].last;
         let u = st.u.mean;

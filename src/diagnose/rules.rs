@@ -197,7 +197,12 @@ impl Diagnoser {
         // and the manoeuvres after it share the store).
         let data_hold =
             st.decided_by == Some(Rule::F3) && t - st.data_named_at < self.params.clear_s;
-        if alarms == 0 && data_alarm != Some(j) && !data_hold {
+        // Nor, for an angle output, while the MIT-UKF's bounds still show a fault by the class
+        // definitions: near trim a surface's or servo's loss moves the output too little for
+        // an alarm to last, while its gain stays known to be off. (A range output works far
+        // from zero, where a gain's fault is in the deviation itself.)
+        let shown = self.is_angle[j] && self.filter_shows_fault(j);
+        if alarms == 0 && data_alarm != Some(j) && !data_hold && !shown {
             let mut d = self.decision(t, j, Event::Cleared, None, 0, Rule::R1);
             d.detail = Some(format!(
                 "no filter alarm for {} s and no data alarm",

@@ -761,3 +761,34 @@ fn identification_a_motors_bias_the_filters_read_as_a_gain_above_one_is_the_offs
     assert!((id.delta - 0.15).abs() < 0.01, "{id:?}");
     assert_eq!(run("plane"), None);
 }
+
+#[test]
+fn r1_a_surfaces_fault_stands_while_the_bounds_show_it() {
+    // Plane aileron read at gamma 0.75 (bounds ±0.08) from 8 s to 20 s. Its command is about
+    // 0.3 until 12 s (a deviation of -0.075: an alarm), then about 0 (the output at trim
+    // whatever the gain, and the gain statistic under half its threshold: the alarm ends).
+    // The fault stands while the bounds keep the gain below 0.85,
+    // and clears once the estimate is back; a quad's motor read the same way clears when its
+    // alarm ends.
+    let run = |profile: &str| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if (8.0..20.0).contains(&t) {
+                e[0] = estimate(0.75, 0.08, 0.0, 0.02);
+            }
+            e
+        };
+        let u = move |t: f64| dithered(n, if t < 12.0 { 0.3 } else { 0.0 }, 0.03)(t);
+        f.fly(0.0, 26.0, u, est, None);
+        assert_eq!(f.events(Event::Fault).len(), 1, "{:?}", f.decisions);
+        let cleared = f.events(Event::Cleared);
+        assert_eq!(cleared.len(), 1, "{:?}", f.decisions);
+        cleared[0].t
+    };
+    let surface = run("plane");
+    assert!((20.0..22.5).contains(&surface), "{surface}");
+    let motor = run("quad-x");
+    assert!(motor < 20.0, "{motor}");
+}
