@@ -1,0 +1,252 @@
+//! Tests of rules X1, D2, R1, C2 and the identification, beside `vehicle_tests.rs`, whose
+//! flight and estimate helpers they use.
+
+use super::*;
+
+#[test]
+fn x1_a_decision_out_of_the_flight_envelope_is_marked_as_a_crash() {
+    // Quad X, motor 2 at gamma 0.6 from 8 s; from 7.7 s the vehicle rolls past 70°.
+    let run = |crash: bool| {
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
+        let mut out = vec![];
+        let mut all = vec![];
+        for k in 0..700 {
+            let t = k as f64 * DT;
+            let mut e = vec![healthy(0.02); 4];
+            if t >= 8.0 {
+                e[1] = estimate(0.6, 0.05, 0.0, 0.02);
+            }
+            let roll = if crash && t >= 7.7 {
+                70f64.to_radians()
+            } else {
+                0.0
+            };
+            d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
+            d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
+            all.append(&mut out);
+        }
+        all.into_iter().find(|x| x.event == Event::Fault).unwrap()
+    };
+    let crashed = run(true);
+    assert!(crashed.in_crash, "{crashed:?}");
+    assert!(crashed.detail.unwrap().contains("(X1)"));
+    let flying = run(false);
+    assert!(!flying.in_crash && !flying.detail.unwrap().contains("X1"));
+}
+
+/// Plane, aileron commanded about 0.1 ± 0.08, its gain `gain` from 16 s, which the filters do
+/// not show at all (their estimates stay healthy, so no CUSUM rises and nothing is under way).
+fn plane_aileron_gain(gain: f64, to: f64) -> Flight {
+    let mut f = Flight::new("plane");
+    let u = |t: f64| {
+        vec![
+            0.1 + 0.08 * (t * 3.1).sin(),
+            0.05 * (t * 2.0).sin(),
+            0.02 * (t * 1.7).sin(),
+        ]
+    };
+    let change =
+        move |t: f64, u: &[f64]| (0usize, if t >= 16.0 { (gain - 1.0) * u[0] } else { 0.0 });
+    f.fly(
+        0.0,
+        to,
+        u,
+        |_| vec![healthy(0.02); 3],
+        Some(&change as Change),
+    );
+    f
+}
+
+#[test]
+fn d2_the_data_read_while_nothing_is_under_way_and_a_fault_is_what_the_classes_define() {
+    // A loss to 0.75: the data, read every `SCAN_S` though no filter statistic moves, name it
+    // clearly, and a gain under 1 - loe_tau is a fault (the gain statistic's threshold would
+    // need a loss to 0.62).
+    let f = plane_aileron_gain(0.75, 22.0);
+    let faults = f.events(Event::Fault);
+    assert_eq!(faults.len(), 1, "{:?}", f.decisions);
+    assert_eq!(faults[0].rule, Some(Rule::F3));
+    assert_eq!(faults[0].actuator.as_deref(), Some("aileron"));
+    assert!(faults[0].t < 19.0, "{}", faults[0].t);
+    // A gain above one is no class: read as clearly, it decides nothing.
+    let f = plane_aileron_gain(1.3, 22.0);
+    assert!(f.events(Event::Fault).is_empty(), "{:?}", f.decisions);
+}
+
+#[test]
+fn r1_a_fault_the_data_decided_stands_until_they_have_not_named_it_for_clear_s() {
+    let mut f = plane_aileron_gain(0.75, 20.0);
+    assert_eq!(f.events(Event::Fault).len(), 1, "{:?}", f.decisions);
+    // The store is lost (a long telemetry hole): the data name nothing from 20 s on.
+    f.d.residual_gap();
+    let n = f.n();
+    f.fly(
+        20.0,
+        25.0,
+        dithered(n, 0.1, 0.08),
+        |_| vec![healthy(0.02); 3],
+        None,
+    );
+    let cleared = f.events(Event::Cleared);
+    assert_eq!(cleared.len(), 1, "{:?}", f.decisions);
+    let t = cleared[0].t;
+    assert!((21.9..22.2).contains(&t), "cleared at {t}");
+}
+
+#[test]
+fn c2_a_motors_output_overstated_below_zero_is_a_loss() {
+    // Quad X, motor 2 read from 8 s at gamma -0.6 and delta +0.1 (both beyond their
+    // tolerances: the mixed fallback) at a command about 0.5: the output read is -0.2, a
+    // motor's cannot be; the filters overstate a loss, which is what it is. A surface's
+    // output may cross zero: the plane's elevator at 0.1 read at gamma -0.6, delta -0.05 has
+    // moved by twice its command through zero, a bias.
+    let run = |profile: &str, mean: f64, delta: f64| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if t >= 8.0 {
+                e[1] = estimate(-0.6, 0.1, delta, 0.01);
+            }
+            e
+        };
+        f.fly(0.0, 14.0, dithered(n, mean, 0.04), est, None);
+        let fault = f.events(Event::Fault);
+        assert_eq!(fault.len(), 1, "{:?}", f.decisions);
+        fault[0].class
+    };
+    assert_eq!(
+        run("quad-x", 0.5, 0.1),
+        Some(FaultClass::LossOfEffectiveness)
+    );
+    assert_eq!(run("plane", 0.1, -0.05), Some(FaultClass::Bias));
+}
+
+#[test]
+fn c2_a_gain_bounded_near_zero_with_an_offset_is_stuck() {
+    // Actuator 2 read from 8 s at gamma 0.02 ± 0.1 with an offset while its command swings:
+    // the output no longer follows it. The plane's elevator (command about 0.1) with delta
+    // +0.12: stuck. A quad's motor (about 0.5) with delta +0.3 is stuck too; with delta -0.1
+    // its output would be below zero, a total loss. The same gain with bounds reaching 0.3
+    // (a gain passing through zero) is not told stuck.
+    let run = |profile: &str, mean: f64, g_half: f64, delta: f64| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if t >= 8.0 {
+                e[1] = estimate(0.02, g_half, delta, 0.01);
+            }
+            e
+        };
+        f.fly(0.0, 14.0, dithered(n, mean, 0.04), est, None);
+        let fault = f.events(Event::Fault);
+        assert_eq!(fault.len(), 1, "{:?}", f.decisions);
+        fault[0].class
+    };
+    assert_eq!(run("plane", 0.1, 0.1, 0.12), Some(FaultClass::Stuck));
+    assert_eq!(run("quad-x", 0.5, 0.1, 0.3), Some(FaultClass::Stuck));
+    assert_eq!(
+        run("quad-x", 0.5, 0.1, -0.1),
+        Some(FaultClass::LossOfEffectiveness)
+    );
+    assert_ne!(run("plane", 0.1, 0.3, 0.12), Some(FaultClass::Stuck));
+}
+
+#[test]
+fn x1_a_tumble_through_level_is_still_a_crash_until_it_has_been_level_for_clear_s() {
+    // Quad X, rolled past 70° from 7.0 s to 7.4 s, level again from 7.4 s (a tumble passes
+    // through level): motor 2 at gamma 0.6 from `onset`, decided by F2 3 s later, is decided
+    // in the crash when the vehicle has been level for less than clear_s, not afterwards.
+    let run = |onset: f64| {
+        let p = Profile::resolve("quad-x").unwrap();
+        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
+        let mut out = vec![];
+        let mut all = vec![];
+        for k in 0..800 {
+            let t = k as f64 * DT;
+            let mut e = vec![healthy(0.02); 4];
+            if t >= onset {
+                e[1] = estimate(0.6, 0.05, 0.0, 0.02);
+            }
+            let roll = if (7.0..7.4).contains(&t) {
+                70f64.to_radians()
+            } else {
+                0.0
+            };
+            d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
+            d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
+            all.append(&mut out);
+        }
+        all.into_iter().find(|x| x.event == Event::Fault).unwrap()
+    };
+    let tumbling = run(5.5);
+    assert!(
+        (7.4..9.4).contains(&tumbling.t) && tumbling.in_crash,
+        "{tumbling:?}"
+    );
+    let recovered = run(10.0);
+    assert!(!recovered.in_crash, "{recovered:?}");
+}
+
+#[test]
+fn identification_a_motors_bias_the_filters_read_as_a_gain_above_one_is_the_offset() {
+    // Actuator 2 read from 8 s at gamma 1.3 (bounds ±0.05), offset 0, command about 0.5, and
+    // nothing in the data: decided on the filters' mixed fallback, a bias. On a quad's motor no
+    // class has a gain above one, so the fault is identified as the offset its output shows
+    // at the operating point (0.3 × 0.5), gain one. A plane's surface is not (an angle output
+    // has no such elimination: its offset and gain are the data's to tell).
+    let run = |profile: &str| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if t >= 8.0 {
+                e[1] = estimate(1.3, 0.05, 0.0, 0.01);
+            }
+            e
+        };
+        f.fly(0.0, 14.0, dithered(n, 0.5, 0.03), est, None);
+        let fault = f.events(Event::Fault);
+        assert_eq!(fault.len(), 1, "{:?}", f.decisions);
+        assert_eq!(fault[0].class, Some(FaultClass::Bias), "{:?}", fault[0]);
+        f.d.identified(1)
+    };
+    let id = run("quad-x").expect("the motor's offset is identified");
+    assert_eq!(id.kind, IdentifiedKind::Offset);
+    assert_eq!(id.gamma, 1.0);
+    assert!((id.delta - 0.15).abs() < 0.01, "{id:?}");
+    assert_eq!(run("plane"), None);
+}
+
+#[test]
+fn r1_a_surfaces_fault_stands_while_the_bounds_show_it() {
+    // Plane aileron read at gamma 0.75 (bounds ±0.08) from 8 s to 20 s. Its command is about
+    // 0.3 until 12 s (a deviation of -0.075: an alarm), then about 0 (the output at trim
+    // whatever the gain, and the gain statistic under half its threshold: the alarm ends).
+    // The fault stands while the bounds keep the gain below 0.85,
+    // and clears once the estimate is back; a quad's motor read the same way clears when its
+    // alarm ends.
+    let run = |profile: &str| {
+        let mut f = Flight::new(profile);
+        let n = f.n();
+        let est = move |t: f64| {
+            let mut e = vec![healthy(0.02); n];
+            if (8.0..20.0).contains(&t) {
+                e[0] = estimate(0.75, 0.08, 0.0, 0.02);
+            }
+            e
+        };
+        let u = move |t: f64| dithered(n, if t < 12.0 { 0.3 } else { 0.0 }, 0.03)(t);
+        f.fly(0.0, 26.0, u, est, None);
+        assert_eq!(f.events(Event::Fault).len(), 1, "{:?}", f.decisions);
+        let cleared = f.events(Event::Cleared);
+        assert_eq!(cleared.len(), 1, "{:?}", f.decisions);
+        cleared[0].t
+    };
+    let surface = run("plane");
+    assert!((20.0..22.5).contains(&surface), "{surface}");
+    let motor = run("quad-x");
+    assert!(motor < 20.0, "{motor}");
+}
