@@ -100,10 +100,11 @@ impl Diagnoser {
                 false,
             ),
         };
-        if margin < DATA_MARGIN || (mixed >= PAIR_INSIGNIFICANT && !pair_keeps) {
+        let whitened = self.whitened_kind(j).is_some();
+        let needed = if whitened { KIND_MARGIN } else { DATA_MARGIN };
+        if margin < needed || (mixed >= PAIR_INSIGNIFICANT && !pair_keeps) {
             return None;
         }
-        let whitened = self.whitened_kind(j).is_some();
         match kind {
             ChangeKind::Gain if value < 1.0 - p.loe_tau => Some(FaultClass::LossOfEffectiveness),
             // Hovering, a motor's gain and offset differ only through its command's few per
@@ -342,7 +343,12 @@ impl Diagnoser {
             whitened.is_none() && kind == ChangeKind::Offset && self.isolation.is_motor[j];
         let pair_keeps = whitened.is_some_and(|f| self.pair_keeps_kind(&f));
         let pair_better = mixed_margin >= DATA_MARGIN && !pair_keeps;
-        if !long || margin < DATA_MARGIN || pair_better || motor_offset_plain {
+        let needed = if whitened.is_some() {
+            KIND_MARGIN
+        } else {
+            DATA_MARGIN
+        };
+        if !long || margin < needed || pair_better || motor_offset_plain {
             return None;
         }
         if !(value.is_finite() && std.is_finite() && std > 0.0) {

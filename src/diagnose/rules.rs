@@ -49,6 +49,16 @@ impl Diagnoser {
         self.active(k).is_some() && t - self.actuators[k].decided_at >= DATA_WAIT_S
     }
 
+    /// Another actuator's fault in force younger than `DATA_WAIT_S`, and the data do not name
+    /// `j` clearly: at a fault's onset the filters spread it over other actuators and the
+    /// change test's unclear best fit flickers between them, so an alarm elsewhere is only
+    /// evidence of the fault in force.
+    fn young_elsewhere(&self, t: f64, j: usize) -> bool {
+        let young = (0..self.actuators.len())
+            .any(|k| k != j && self.active(k).is_some() && !self.older(t, k));
+        young && self.naming_reading().is_none_or(|r| r.actuator != j)
+    }
+
     /// A healthy or suspect actuator: F1-F3 decide a fault, S1-S2 make it suspect, S3 ends a
     /// suspicion.
     pub(super) fn judge(
@@ -81,7 +91,7 @@ impl Diagnoser {
             // F2: the data have had the wait since the alarm, or since they last named another
             // actuator clearly, and named none.
             let since = st.first_alarm().unwrap_or(t).max(st.contradicted_at);
-            if best.is_some_and(|k| k == j || self.older(t, k)) {
+            if best.is_some_and(|k| k == j || self.older(t, k)) && !self.young_elsewhere(t, j) {
                 Some(Rule::F1)
             } else if t - since >= DATA_WAIT_S {
                 Some(Rule::F2)

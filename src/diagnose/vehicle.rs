@@ -44,6 +44,12 @@ use crate::telemetry::{Profile, Role};
 
 /// Twice the log likelihood ratio that counts as clear (a ratio of e^10, about 2e4 to 1).
 const DATA_MARGIN: f64 = 20.0;
+/// Twice the log likelihood ratio at which the whitened comparison of one actuator's gain
+/// against its offset tells the kind: the 99 % point of chi-squared with one degree of freedom.
+/// The actuator and the change's start are given, so this is one comparison of two
+/// one-parameter fits on a residual whitened by its learned colour, where `DATA_MARGIN` covers
+/// the search over every actuator and start.
+const KIND_MARGIN: f64 = 6.63;
 /// A changed stretch this long is needed before the data give a class or alarm (s).
 pub(crate) const CLASS_MIN_S: f64 = 1.0;
 /// The change test's store (s, at most `change::MAX_STORE` samples) and its shortest fit.
@@ -545,6 +551,25 @@ impl Diagnoser {
         self.statistics(t, u, est, warm);
         if !warm {
             return;
+        }
+        if let Some(r) = self.reading {
+            let kind = self.whitened_kind(r.actuator);
+            tracing::trace!(
+                t,
+                actuator = r.actuator,
+                kind = ?r.kind,
+                value = r.value,
+                since = r.since,
+                margin = r.margin_over(r.next_kind_drop),
+                naming = r.margin_over(r.next_actuator_drop),
+                whitened_kind = ?kind.map(|f| f.kind),
+                whitened_value = kind.map(|f| f.value),
+                whitened_margin = kind.map(|f| f.margin),
+                pair_margin = kind.map(|f| f.mixed_margin),
+                pair_gamma = kind.map(|f| f.pair_gamma),
+                pair_delta = kind.map(|f| f.pair_delta),
+                "change test"
+            );
         }
         let data_alarm = self.data_alarm();
         let named = self.naming_reading().map(|r| r.actuator);
