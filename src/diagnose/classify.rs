@@ -90,14 +90,16 @@ impl Diagnoser {
                 f.value,
                 f.margin,
                 f.mixed_margin,
-                self.pair_keeps_kind(&f),
+                self.pair_keeps_kind(&f, f.kind),
             ),
             None => (
                 r.kind,
                 r.value,
                 r.margin_over(r.next_kind_drop),
                 -r.margin_over(r.mixed_drop),
-                false,
+                r.kind == ChangeKind::Stuck
+                    && (self.change.whitened_gain_or_offset(j, r.samples))
+                        .is_some_and(|f| self.pair_keeps_kind(&f, ChangeKind::Stuck)),
             ),
         };
         let whitened = self.whitened_kind(j).is_some();
@@ -117,17 +119,18 @@ impl Diagnoser {
             _ => None,
         }
     }
-    /// Whether a gain and an offset fitted together leave the whitened fit's kind its class:
-    /// the pair's other coefficient is within the tolerance that tells the class (an offset's
-    /// pair gain within `loe_tau` of 1, a gain's pair offset within `bias_tau`), so the class
-    /// definitions applied to the pair read the same class. The pair then fits better only by
-    /// what the tolerance is for: the calibrated model's own error on the command's swings.
-    pub(super) fn pair_keeps_kind(&self, f: &KindFit) -> bool {
+    /// Whether a gain and an offset fitted together (on the whitened residual) leave `kind` its
+    /// class: the class definitions applied to the pair read the same class (an offset's pair
+    /// gain within `loe_tau` of 1, a gain's pair offset within `bias_tau`, a stuck output's
+    /// pair gain within `stuck_gamma` of 0: a stuck output is a pair, its gain zero). The pair
+    /// then fits better only by what the tolerance is for: the calibrated model's own error on
+    /// the command's swings.
+    pub(super) fn pair_keeps_kind(&self, f: &KindFit, kind: ChangeKind) -> bool {
         let p = &self.params;
-        match f.kind {
+        match kind {
             ChangeKind::Gain => f.pair_delta.abs() <= p.bias_tau,
             ChangeKind::Offset => (f.pair_gamma - 1.0).abs() <= p.loe_tau,
-            ChangeKind::Stuck => false,
+            ChangeKind::Stuck => f.pair_gamma.abs() <= p.stuck_gamma,
         }
     }
     /// Whether the command separates gain and bias: its std over the window at least
@@ -294,7 +297,8 @@ impl Diagnoser {
                 |f| (f.kind, f.margin, f.mixed_margin),
             );
             let other_kind = kind != ChangeKind::Offset && margin >= DATA_MARGIN;
-            let pair = mixed >= DATA_MARGIN && !fit.is_some_and(|f| self.pair_keeps_kind(&f));
+            let pair =
+                mixed >= DATA_MARGIN && !fit.is_some_and(|f| self.pair_keeps_kind(&f, f.kind));
             if other_kind || pair {
                 return None;
             }
@@ -341,7 +345,7 @@ impl Diagnoser {
         let long = r.samples as f64 * self.dt >= CLASS_MIN_S;
         let motor_offset_plain =
             whitened.is_none() && kind == ChangeKind::Offset && self.isolation.is_motor[j];
-        let pair_keeps = whitened.is_some_and(|f| self.pair_keeps_kind(&f));
+        let pair_keeps = fit.is_some_and(|f| self.pair_keeps_kind(&f, kind));
         let pair_better = mixed_margin >= DATA_MARGIN && !pair_keeps;
         let needed = if whitened.is_some() {
             KIND_MARGIN

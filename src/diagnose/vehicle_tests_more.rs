@@ -327,3 +327,35 @@ fn f1_a_second_alarm_at_a_faults_onset_needs_the_data_to_prefer_it() {
     let faults = f.events(Event::Fault);
     assert_eq!(faults.len(), 1, "{:?}", f.decisions);
 }
+
+#[test]
+fn c1_a_pair_within_the_stuck_tolerance_keeps_a_stuck_class() {
+    // Quad X motor 1 from 8 s: its output stays near 0.5, following a tenth of its command's
+    // swings (the calibrated model's own error on them, or a nearly stuck output). A gain and an
+    // offset together fit better than the output stuck, but with a gain within `stuck_gamma` of
+    // zero, which the class definitions read as stuck too; the MIT-UKF reads a loss.
+    let mut f = Flight::new("quad-x");
+    let est = |t: f64| {
+        let mut e = vec![healthy(0.02); 4];
+        if t >= 8.0 {
+            e[0] = estimate(0.5, 0.05, 0.0, 0.02);
+        }
+        e
+    };
+    let change = |t: f64, u: &[f64]| {
+        let s = if t >= 8.0 {
+            0.5 + 0.1 * (u[0] - 0.5) - u[0]
+        } else {
+            0.0
+        };
+        (0usize, s)
+    };
+    f.fly(0.0, 14.0, dithered(4, 0.5, 0.1), est, Some(&change));
+    let last = f
+        .decisions
+        .iter()
+        .rev()
+        .find(|d| d.class.is_some())
+        .unwrap();
+    assert_eq!(last.class, Some(FaultClass::Stuck), "{:?}", f.decisions);
+}
