@@ -268,7 +268,7 @@ fn the_summary_says_which_fault_cleared_and_when() {
     };
     // With the fault's kind and onset (the decisions' first fault on motor 1).
     assert!(
-        row("motor1 ").ends_with("cleared at t=136.02 s (loss_of_effectiveness from t=113.74 s)"),
+        row("motor1 ").ends_with("cleared at t=136.08 s (loss_of_effectiveness from t=113.74 s)"),
         "{out}"
     );
     // The others were never decided: healthy, or suspect where their bounds exclude the
