@@ -34,6 +34,24 @@ fn estimate(gamma: f64, g_half: f64, delta: f64, d_half: f64) -> AhcEstimate {
     }
 }
 
+/// Healthy estimates of `n` actuators, and from `from` s on the given actuators' instead.
+fn faulted(
+    n: usize,
+    from: f64,
+    faults: &[(usize, AhcEstimate)],
+) -> impl Fn(f64) -> Vec<AhcEstimate> + use<> {
+    let faults = faults.to_vec();
+    move |t| {
+        let mut e = vec![healthy(0.02); n];
+        if t >= from {
+            for &(j, f) in &faults {
+                e[j] = f;
+            }
+        }
+        e
+    }
+}
+
 /// A flight of `seconds`: per step the commands, both filters' estimates and, where given,
 /// the change of one actuator's effective output (for the healthy model's residual, with
 /// white noise of 0.3 per weighted row).
@@ -93,6 +111,11 @@ impl Flight {
         (self.decisions.iter())
             .filter(|d| d.event == event)
             .collect()
+    }
+
+    /// The class of the last decision that has one.
+    fn last_class(&self) -> Option<FaultClass> {
+        self.decisions.iter().rev().find_map(|d| d.class)
     }
 
     fn n(&self) -> usize {

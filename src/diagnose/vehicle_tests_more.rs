@@ -259,18 +259,12 @@ fn c1_the_whitened_comparison_tells_a_motors_kind_before_it_is_clear_enough_to_n
     // short of the `DATA_MARGIN` that names an actuator, it is the data's class, and the
     // fault's class is a bias from then on.
     let mut f = Flight::new("quad-x");
-    let est = |t: f64| {
-        let mut e = vec![healthy(0.02); 4];
-        if t >= 16.0 {
-            e[0] = estimate(0.7, 0.05, 0.0, 0.02);
-        }
-        e
-    };
+    let est = faulted(4, 16.0, &[(0, estimate(0.7, 0.05, 0.0, 0.02))]);
     let change = |t: f64, _: &[f64]| (0usize, if t >= 16.0 { -0.15 } else { 0.0 });
     let mut first_read = None;
     let mut t = 0.0;
     while t < 22.0 - 1e-9 {
-        f.fly(t, t + DT, dithered(4, 0.5, 0.03), est, Some(&change));
+        f.fly(t, t + DT, dithered(4, 0.5, 0.03), &est, Some(&change));
         t += DT;
         let margin = f.d.whitened_kind(0).map_or(0.0, |k| k.margin);
         if first_read.is_none() && f.d.data_class(0) == Some(FaultClass::Bias) {
@@ -282,30 +276,18 @@ fn c1_the_whitened_comparison_tells_a_motors_kind_before_it_is_clear_enough_to_n
         margin < DATA_MARGIN,
         "read at {at} with a margin of {margin}"
     );
-    let last = f
-        .decisions
-        .iter()
-        .rev()
-        .find(|d| d.class.is_some())
-        .unwrap();
-    assert_eq!(last.class, Some(FaultClass::Bias), "{:?}", f.decisions);
+    assert_eq!(f.last_class(), Some(FaultClass::Bias), "{:?}", f.decisions);
 }
 
 #[test]
-fn f1_a_second_alarm_at_a_faults_onset_needs_the_data_to_prefer_it() {
+fn f1_a_second_alarm_at_a_faults_onset_needs_the_data_to_name_it_clearly() {
     // Quad X: from 8 s the data show a change that motors 1 and 4 explain equally well (half
     // of it each), so the change test's best fit flickers between them, and both filters read
     // a loss. The first decided is a fault; the other's alarm, while that fault is younger than
     // `DATA_WAIT_S`, is its evidence: the data never name it clearly.
     let mut f = Flight::new("quad-x");
-    let est = |t: f64| {
-        let mut e = vec![healthy(0.02); 4];
-        if t >= 8.0 {
-            e[0] = estimate(0.6, 0.05, 0.0, 0.02);
-            e[3] = estimate(0.6, 0.05, 0.0, 0.02);
-        }
-        e
-    };
+    let loss = estimate(0.6, 0.05, 0.0, 0.02);
+    let est = faulted(4, 8.0, &[(0, loss), (3, loss)]);
     let u = dithered(4, 0.5, 0.04);
     let mut out = vec![];
     for k in 0..((8.0 + DATA_WAIT_S) / DT) as usize {
@@ -335,13 +317,7 @@ fn c1_a_pair_within_the_stuck_tolerance_keeps_a_stuck_class() {
     // offset together fit better than the output stuck, but with a gain within `stuck_gamma` of
     // zero, which the class definitions read as stuck too; the MIT-UKF reads a loss.
     let mut f = Flight::new("quad-x");
-    let est = |t: f64| {
-        let mut e = vec![healthy(0.02); 4];
-        if t >= 8.0 {
-            e[0] = estimate(0.5, 0.05, 0.0, 0.02);
-        }
-        e
-    };
+    let est = faulted(4, 8.0, &[(0, estimate(0.5, 0.05, 0.0, 0.02))]);
     let change = |t: f64, u: &[f64]| {
         let s = if t >= 8.0 {
             0.5 + 0.1 * (u[0] - 0.5) - u[0]
@@ -351,11 +327,5 @@ fn c1_a_pair_within_the_stuck_tolerance_keeps_a_stuck_class() {
         (0usize, s)
     };
     f.fly(0.0, 14.0, dithered(4, 0.5, 0.1), est, Some(&change));
-    let last = f
-        .decisions
-        .iter()
-        .rev()
-        .find(|d| d.class.is_some())
-        .unwrap();
-    assert_eq!(last.class, Some(FaultClass::Stuck), "{:?}", f.decisions);
+    assert_eq!(f.last_class(), Some(FaultClass::Stuck), "{:?}", f.decisions);
 }
