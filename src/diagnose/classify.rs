@@ -382,6 +382,28 @@ impl Diagnoser {
             },
         })
     }
+    /// The change test's reading of this step, for `RUST_LOG=ahcmon::diagnose=trace`.
+    pub(super) fn trace_reading(&self, t: f64) {
+        if let Some(r) = self.reading {
+            let kind = self.whitened_kind(r.actuator);
+            tracing::trace!(
+                t,
+                actuator = r.actuator,
+                kind = ?r.kind,
+                value = r.value,
+                since = r.since,
+                margin = r.margin_over(r.next_kind_drop),
+                naming = r.margin_over(r.next_actuator_drop),
+                whitened_kind = ?kind.map(|f| f.kind),
+                whitened_value = kind.map(|f| f.value),
+                whitened_margin = kind.map(|f| f.margin),
+                pair_margin = kind.map(|f| f.mixed_margin),
+                pair_gamma = kind.map(|f| f.pair_gamma),
+                pair_delta = kind.map(|f| f.pair_delta),
+                "change test"
+            );
+        }
+    }
     /// What the change test reads for actuator `j`, for a decision's detail.
     pub(super) fn data_note(&self, j: usize) -> Option<String> {
         let r = self.reading.filter(|r| r.actuator == j)?;

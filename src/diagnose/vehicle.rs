@@ -552,25 +552,7 @@ impl Diagnoser {
         if !warm {
             return;
         }
-        if let Some(r) = self.reading {
-            let kind = self.whitened_kind(r.actuator);
-            tracing::trace!(
-                t,
-                actuator = r.actuator,
-                kind = ?r.kind,
-                value = r.value,
-                since = r.since,
-                margin = r.margin_over(r.next_kind_drop),
-                naming = r.margin_over(r.next_actuator_drop),
-                whitened_kind = ?kind.map(|f| f.kind),
-                whitened_value = kind.map(|f| f.value),
-                whitened_margin = kind.map(|f| f.margin),
-                pair_margin = kind.map(|f| f.mixed_margin),
-                pair_gamma = kind.map(|f| f.pair_gamma),
-                pair_delta = kind.map(|f| f.pair_delta),
-                "change test"
-            );
-        }
+        self.trace_reading(t);
         let data_alarm = self.data_alarm();
         let named = self.naming_reading().map(|r| r.actuator);
         if let Some(k) = named {

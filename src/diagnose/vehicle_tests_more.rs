@@ -3,31 +3,29 @@
 
 use super::*;
 
+/// Quad X, motor 2 read at gamma 0.6 from `onset`, rolled past 70° while `rolled(t)`: the
+/// first fault decision of `steps` steps.
+fn rolled_first_fault(steps: usize, onset: f64, rolled: impl Fn(f64) -> bool) -> Decision {
+    let p = Profile::resolve("quad-x").unwrap();
+    let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
+    let est = faulted(4, onset, &[(1, estimate(0.6, 0.05, 0.0, 0.02))]);
+    let mut out = vec![];
+    let mut all = vec![];
+    for k in 0..steps {
+        let t = k as f64 * DT;
+        let e = est(t);
+        let roll = if rolled(t) { 70f64.to_radians() } else { 0.0 };
+        d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
+        d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
+        all.append(&mut out);
+    }
+    all.into_iter().find(|x| x.event == Event::Fault).unwrap()
+}
+
 #[test]
 fn x1_a_decision_out_of_the_flight_envelope_is_marked_as_a_crash() {
     // Quad X, motor 2 at gamma 0.6 from 8 s; from 7.7 s the vehicle rolls past 70°.
-    let run = |crash: bool| {
-        let p = Profile::resolve("quad-x").unwrap();
-        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
-        let mut out = vec![];
-        let mut all = vec![];
-        for k in 0..700 {
-            let t = k as f64 * DT;
-            let mut e = vec![healthy(0.02); 4];
-            if t >= 8.0 {
-                e[1] = estimate(0.6, 0.05, 0.0, 0.02);
-            }
-            let roll = if crash && t >= 7.7 {
-                70f64.to_radians()
-            } else {
-                0.0
-            };
-            d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
-            d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
-            all.append(&mut out);
-        }
-        all.into_iter().find(|x| x.event == Event::Fault).unwrap()
-    };
+    let run = |crash: bool| rolled_first_fault(700, 8.0, |t| crash && t >= 7.7);
     let crashed = run(true);
     assert!(crashed.in_crash, "{crashed:?}");
     assert!(crashed.detail.unwrap().contains("(X1)"));
@@ -159,28 +157,7 @@ fn x1_a_tumble_through_level_is_still_a_crash_until_it_has_been_level_for_clear_
     // Quad X, rolled past 70° from 7.0 s to 7.4 s, level again from 7.4 s (a tumble passes
     // through level): motor 2 at gamma 0.6 from `onset`, decided by F2 3 s later, is decided
     // in the crash when the vehicle has been level for less than clear_s, not afterwards.
-    let run = |onset: f64| {
-        let p = Profile::resolve("quad-x").unwrap();
-        let mut d = Diagnoser::new(DiagnosisParams::default(), 1, &p, DT);
-        let mut out = vec![];
-        let mut all = vec![];
-        for k in 0..800 {
-            let t = k as f64 * DT;
-            let mut e = vec![healthy(0.02); 4];
-            if t >= onset {
-                e[1] = estimate(0.6, 0.05, 0.0, 0.02);
-            }
-            let roll = if (7.0..7.4).contains(&t) {
-                70f64.to_radians()
-            } else {
-                0.0
-            };
-            d.envelope(t, [roll, 0.0, 0.0], Some(-9.8));
-            d.update(t, &dithered(4, 0.5, 0.04)(t), &[&e, &e], &mut out);
-            all.append(&mut out);
-        }
-        all.into_iter().find(|x| x.event == Event::Fault).unwrap()
-    };
+    let run = |onset: f64| rolled_first_fault(800, onset, |t| (7.0..7.4).contains(&t));
     let tumbling = run(5.5);
     assert!(
         (7.4..9.4).contains(&tumbling.t) && tumbling.in_crash,
@@ -200,13 +177,7 @@ fn identification_a_motors_bias_the_filters_read_as_a_gain_above_one_is_the_offs
     let run = |profile: &str| {
         let mut f = Flight::new(profile);
         let n = f.n();
-        let est = move |t: f64| {
-            let mut e = vec![healthy(0.02); n];
-            if t >= 8.0 {
-                e[1] = estimate(1.3, 0.05, 0.0, 0.01);
-            }
-            e
-        };
+        let est = faulted(n, 8.0, &[(1, estimate(1.3, 0.05, 0.0, 0.01))]);
         f.fly(0.0, 14.0, dithered(n, 0.5, 0.03), est, None);
         let fault = f.events(Event::Fault);
         assert_eq!(fault.len(), 1, "{:?}", f.decisions);
