@@ -761,12 +761,18 @@ fn calibrate_says_what_concerns_the_profile_it_writes() {
         "sitl_quadx_maneuvers_motor4_gain0p7/sitl_quadx_maneuvers_motor4_gain0p7.tlog",
     );
     let m = maneuvers.to_str().unwrap();
+    // Roll and pitch moved with nothing in the commands to explain it, and every motor acts
+    // mostly there (G2): no profile is written.
     let (code, _, err) = calibrate(m, "125", &[]);
-    assert_eq!(code, 0, "{err}");
+    assert_eq!(code, 2, "{err}");
     assert!(
-        err.contains("warning: roll and pitch moved (rate spread 0.16, 0.18 rad/s) but the commands do not explain"),
+        err.contains(
+            "roll (it moved (rate spread 0.16 rad/s) but the commands do not explain that motion"
+        ) && err.contains("pitch (it moved (rate spread 0.18 rad/s)")
+            && err.contains("every actuator acts mostly there (rule G2)"),
         "{err}"
     );
+    assert!(!p.exists());
     let (code, _, err) = calibrate(m, "95", &[]);
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("do not explain"), "{err}");

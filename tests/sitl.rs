@@ -7,7 +7,7 @@
 
 mod common;
 
-use ahcmon::diagnose::vehicle::{Decision, Event, FaultClass};
+use ahcmon::diagnose::vehicle::{Decision, Event, FaultClass, Rule};
 use ahcmon::estimate::vehicle::AhcEstimate;
 use ahcmon::link::TlogReader;
 use ahcmon::monitor::Monitor;
@@ -363,6 +363,33 @@ fn a_profile_for_another_vehicle_is_warned_about_twice() {
     let run = replay(rel, Some("plane"));
     assert!(warned(&run, "mean nothing"), "{:?}", run.messages);
     assert!(warned(&run, "worse than a constant"), "{:?}", run.messages);
+    // Its next stretch fits pitch and yaw, but roll moved with nothing in the plane's
+    // geometry to explain it: the aileron, acting on roll alone, is not judged (G2), and no
+    // decision but that one is made on it.
+    let on_aileron: Vec<_> = (run.decisions.iter())
+        .filter(|d| d.actuator.as_deref() == Some("aileron"))
+        .collect();
+    assert_eq!(on_aileron.len(), 1, "{on_aileron:?}");
+    assert_eq!(on_aileron[0].event, Event::CannotJudge);
+    assert_eq!(on_aileron[0].rule, Some(Rule::G2));
+    assert!(on_aileron[0].gamma.is_none());
+    assert!(
+        (on_aileron[0].detail.as_deref()).is_some_and(|t| t.contains("roll (it moved")),
+        "{on_aileron:?}"
+    );
+    // As written to the decisions JSONL, it validates against the schema (jsonschema).
+    let schema = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/replay/schemas/decisions.schema.json"
+    );
+    let line = serde_json::to_string(on_aileron[0]).unwrap();
+    let checked = common::run_python(&[
+        "-c",
+        "import json, sys, jsonschema; jsonschema.validate(json.loads(sys.argv[2]), json.load(open(sys.argv[1])), cls=jsonschema.Draft202012Validator); print('valid')",
+        schema,
+        &line,
+    ]);
+    assert!(checked.contains("valid"), "{checked}");
 }
 
 /// `ahcmon calibrate LOG --until UNTIL -o OUT`, and the profile it wrote.

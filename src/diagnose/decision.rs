@@ -112,6 +112,9 @@ pub enum Health {
     /// (S1), or an alarm waits for the data (S2).
     Suspect,
     Fault(FaultClass),
+    /// The calibrated model does not explain the axes this actuator mostly acts on (G2): no
+    /// rule decides on it.
+    CannotJudge,
 }
 
 impl Health {
@@ -120,6 +123,7 @@ impl Health {
             Self::Healthy => "healthy",
             Self::Suspect => "suspect",
             Self::Fault(c) => c.as_str(),
+            Self::CannotJudge => "cannot judge",
         }
     }
 }
@@ -153,6 +157,9 @@ pub enum Rule {
     R1,
     /// Not judged: gain and bias not separable (a statement, `excitation_low`).
     G1,
+    /// Not judged: the calibrated model does not explain the axes the actuator mostly acts on
+    /// (a statement, `cannot_judge`).
+    G2,
     /// Out of the flight envelope: a decision made then is marked `in_crash`.
     X1,
 }
@@ -174,6 +181,9 @@ pub enum Event {
     Suspect,
     /// A suspect actuator is healthy again.
     SuspectCleared,
+    /// An actuator the calibrated model cannot judge (rule G2): said once, and no fault is
+    /// decided on it.
+    CannotJudge,
 }
 
 impl Event {
@@ -182,7 +192,7 @@ impl Event {
     pub fn is_statement(self) -> bool {
         matches!(
             self,
-            Self::ExcitationLow | Self::Suspect | Self::SuspectCleared
+            Self::ExcitationLow | Self::Suspect | Self::SuspectCleared | Self::CannotJudge
         )
     }
 
@@ -198,6 +208,7 @@ impl Event {
             Self::CannotEstimate => "cannot_estimate",
             Self::Suspect => "suspect",
             Self::SuspectCleared => "suspect_cleared",
+            Self::CannotJudge => "cannot_judge",
         }
     }
 }

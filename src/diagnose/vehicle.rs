@@ -560,6 +560,9 @@ impl Diagnoser {
         }
         let from = out.len();
         for j in 0..self.actuators.len() {
+            if self.actuators[j].health == Health::CannotJudge {
+                continue;
+            }
             self.gate(t, j, out);
             self.track_bounds(j);
             match self.actuators[j].health {
@@ -581,6 +584,8 @@ impl Diagnoser {
 
 #[path = "classify.rs"]
 mod classify;
+#[path = "gate.rs"]
+pub mod gate;
 #[path = "rules.rs"]
 mod rules;
 

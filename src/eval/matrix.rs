@@ -314,8 +314,9 @@ pub struct CaseResult {
     /// MIT-UKF gamma and delta minus the truth `JUDGE_AFTER_S` after the decision.
     pub gamma_error: Option<f64>,
     pub delta_error: Option<f64>,
-    /// The vehicle got a `cannot_estimate` decision.
+    /// The vehicle got a `cannot_estimate` decision; an actuator a `cannot_judge` one.
     pub cannot_estimate: bool,
+    pub cannot_judge: bool,
     /// Estimating time (h) of the flight.
     pub estimating_h: f64,
 }
@@ -599,6 +600,7 @@ fn score(
         gamma_error,
         delta_error,
         cannot_estimate: (sink.decisions.iter()).any(|d| d.event == Event::CannotEstimate),
+        cannot_judge: (sink.decisions.iter()).any(|d| d.event == Event::CannotJudge),
         estimating_h,
     }
 }

@@ -35,6 +35,8 @@ pub struct ReportRow {
     pub false_healthy: u32,
     pub healthy_h: f64,
     pub cannot_estimate: usize,
+    /// Flights with an actuator `cannot_judge` (rule G2).
+    pub cannot_judge: usize,
 }
 
 fn percentile(v: &mut [f64], p: f64) -> Option<f64> {
@@ -88,6 +90,7 @@ fn row(vehicle: &str, kind: &str, rows: &[&CaseResult]) -> ReportRow {
     let mut delays = vec![];
     for r in rows {
         out.cannot_estimate += usize::from(r.cannot_estimate);
+        out.cannot_judge += usize::from(r.cannot_judge);
         if r.case.fault.is_none() {
             out.false_healthy += r.false_before_onset;
             out.healthy_h += r.estimating_h;

@@ -19,12 +19,13 @@ fn secs(v: Option<f64>) -> String {
 /// among those the isolation oracle can also name), its delays, class and estimates of those named right (`sep%`: the class right among those
 /// whose class the class oracle separates from the other kinds), wrong-actuator decisions on cases the
 /// oracle cannot detect, false decisions before the onsets and in healthy flights (and per
-/// healthy hour).
+/// healthy hour), and the flights the data could not support: `c_est` with a `cannot_estimate`,
+/// `c_judge` with an actuator `cannot_judge` (rule G2).
 pub fn render(rows: &[ReportRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>5} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+        "{:<12} {:<16} {:>5} {:>5} {:>7} {:>5} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5} {:>7}",
         "vehicle",
         "fault",
         "cases",
@@ -40,7 +41,8 @@ pub fn render(rows: &[ReportRow]) -> String {
         "pre_on",
         "healthy",
         "false/h",
-        "c_est"
+        "c_est",
+        "c_judge"
     );
     for r in rows {
         let per_h = if r.healthy_h > 0.0 {
@@ -50,7 +52,7 @@ pub fn render(rows: &[ReportRow]) -> String {
         };
         let _ = writeln!(
             s,
-            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>5} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5}",
+            "{:<12} {:<16} {:>5} {:>5} {:>7} {:>5} {:>6} {:>6} {:>7} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>5} {:>7}",
             r.vehicle,
             r.kind,
             r.cases,
@@ -66,7 +68,8 @@ pub fn render(rows: &[ReportRow]) -> String {
             r.false_before_onset,
             r.false_healthy,
             per_h,
-            r.cannot_estimate
+            r.cannot_estimate,
+            r.cannot_judge
         );
     }
     s

@@ -1,7 +1,7 @@
 //! The end-of-run summary of a replay or monitor session: per vehicle and actuator the final
 //! estimates with bounds, the decisions, and every counter of what was dropped.
 
-use crate::diagnose::vehicle::FaultClass;
+use crate::diagnose::vehicle::{FaultClass, Health};
 use crate::estimate::vehicle::FILTER_NAMES;
 use crate::monitor::Monitor;
 use crate::protocol::FrameCounters;
@@ -205,8 +205,11 @@ pub fn render(
                         || format!("healthy since the reboot ({} before)", c.as_str()),
                     )
                 }
-                (None, None, _) if p.suspect[j] => {
+                (None, None, _) if p.health[j] == Health::Suspect => {
                     "suspect (evidence short of a fault: see its decision)".into()
+                }
+                (None, None, _) if p.health[j] == Health::CannotJudge => {
+                    "cannot judge (the model does not explain its axes: see its decision)".into()
                 }
                 (None, None, _) => cleared_with(None).unwrap_or_else(|| "healthy".into()),
             };

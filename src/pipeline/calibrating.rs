@@ -5,6 +5,7 @@
 use super::holes::fill_short_holes;
 use super::running::U_HISTORY;
 use super::{Stage, VehiclePipeline};
+use crate::diagnose::vehicle::gate::AxisFailure;
 use crate::model::MAX_ACTUATORS;
 use crate::model::calibrate::{CalibrationSample, calibrate_arx, calibrate_scaled};
 use crate::output::Sink;
@@ -337,11 +338,15 @@ impl VehiclePipeline {
         } else {
             None
         };
-        // Rate axes the model fits worse than a constant would: a profile that is not this
-        // vehicle's, or a stretch that was not healthy flight (an offset-only axis, which a
-        // steady hover does not excite, has little to explain and passes down to R² = -1).
-        let mut poor: Vec<String> = Vec::new();
-        let mut unexplained: Vec<(&str, f64)> = Vec::new();
+        // Rate axes the model does not explain (rule G2): fitted worse than a constant would
+        // (a profile that is not this vehicle's, or a stretch that was not healthy flight; an
+        // offset-only axis, which a steady hover does not excite, has little to explain and
+        // passes down to R² = -1), or left offset-only though the vehicle moved on it.
+        let mut failing: Vec<AxisFailure> = Vec::new();
+        let worse = |axis: usize, r2: f64| AxisFailure {
+            axis,
+            why: format!("R²={r2:.2}, worse than a constant"),
+        };
         let (calibrated, fit, summary) = if let Some(arx) = identified {
             let mut calibrated = profile.clone();
             set_noise_from_fit(&mut calibrated, &arx.quality.residual_std, dt);
@@ -361,7 +366,7 @@ impl VehiclePipeline {
             }
             for (i, r2) in arx.quality.r_squared[..3].iter().enumerate() {
                 if *r2 < 0.0 {
-                    poor.push(format!("{} R²={r2:.2}", axes[i]));
+                    failing.push(worse(i, *r2));
                 }
             }
             let summary = format!(
@@ -383,20 +388,24 @@ impl VehiclePipeline {
             let mut calibrated = profile.with_rate_params(&fit.params);
             set_noise_from_fit(&mut calibrated, &fit.quality.residual_std, dt);
             let axes = ["roll", "pitch", "yaw", "a_z"];
-            for (i, (axis, (r2, scaled))) in axes
-                .iter()
-                .zip(fit.quality.r_squared.iter().zip(&fit.scaled))
+            for (i, (r2, scaled)) in (fit.quality.r_squared.iter().zip(&fit.scaled))
                 .take(3)
                 .enumerate()
             {
-                if *r2 < if *scaled { 0.0 } else { -1.0 } {
-                    poor.push(format!("{axis} R²={r2:.2}"));
-                }
-                // Left offset-only though the vehicle manoeuvred: the commands did not explain
-                // its motion on this geometry (a fault in the stretch, or another frame).
                 let spread = rate_spread(&shifted, i);
-                if !scaled && spread >= MOVED_RATE_STD {
-                    unexplained.push((axis, spread));
+                if *r2 < if *scaled { 0.0 } else { -1.0 } {
+                    failing.push(worse(i, *r2));
+                } else if !scaled && spread >= MOVED_RATE_STD {
+                    // Left offset-only though the vehicle manoeuvred: the commands did not
+                    // explain its motion on this geometry (a fault in the stretch, or another
+                    // frame).
+                    failing.push(AxisFailure {
+                        axis: i,
+                        why: format!(
+                            "it moved (rate spread {spread:.2} rad/s) but the commands do not explain that motion on the geometry of {}",
+                            profile.name
+                        ),
+                    });
                 }
             }
             let summary: Vec<String> = fit
@@ -428,39 +437,24 @@ impl VehiclePipeline {
                 summary
             ),
         );
-        if !poor.is_empty() {
-            let t = samples.last().map_or(0.0, |s| s.t);
-            self.cannot_estimate(
-                t,
-                format!(
-                    "the model fits {} worse than a constant on the calibration stretch ({:.1} Hz): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
-                    poor.join(", "),
-                    1.0 / dt,
-                    calibrated.name
-                ),
-                sink,
-            );
-            return;
-        }
-        if !unexplained.is_empty() {
+        if !failing.is_empty() {
+            let axes = ["roll", "pitch", "yaw"];
             sink.message(
                 self.sysid,
                 &format!(
-                    "warning: {} moved (rate spread {} rad/s) but the commands do not explain that motion on the geometry of {}: the calibration stretch may hold a fault, or the profile may not be this vehicle's; its estimates and decisions are not to be trusted",
-                    unexplained
+                    "warning: the calibrated model does not explain {} on the calibration stretch ({:.1} Hz): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; the actuators acting mostly there are not judged (cannot_judge, rule G2); give the vehicle's profile (--profile, ahcmon calibrate)",
+                    failing
                         .iter()
-                        .map(|(a, _)| *a)
-                        .collect::<Vec<_>>()
-                        .join(" and "),
-                    unexplained
-                        .iter()
-                        .map(|(_, s)| format!("{s:.2}"))
+                        .map(|f| format!("{} ({})", axes[f.axis], f.why))
                         .collect::<Vec<_>>()
                         .join(", "),
+                    1.0 / dt,
                     calibrated.name
                 ),
             );
         }
+        self.failing_axes = failing;
+        self.failing_said = false;
         // A stretch cut short (by --calibrate-until / --calibrate-s) still fits, but loosely.
         if span < SHORT_CALIBRATION_S {
             sink.message(

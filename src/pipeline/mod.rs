@@ -21,7 +21,8 @@ pub use commands::MAX_PWM_US;
 pub use gate::FlightGate;
 pub use step::{Core, StepInput};
 
-use crate::diagnose::vehicle::{Decision, DiagnosisParams, Event};
+use crate::diagnose::vehicle::gate::AxisFailure;
+use crate::diagnose::vehicle::{Decision, DiagnosisParams, Event, Health};
 use crate::estimate::vehicle::AhcEstimate;
 use crate::model::MAX_ACTUATORS;
 use crate::model::calibrate::ScaledFit;
@@ -132,8 +133,13 @@ pub struct VehiclePipeline {
     seen_grounded: bool,
     /// Actuators with a fault in force, by index.
     pub active: [Option<crate::diagnose::vehicle::FaultClass>; MAX_ACTUATORS],
-    /// Actuators the diagnosis holds suspect (rules S1, S2).
-    pub suspect: [bool; MAX_ACTUATORS],
+    /// Each actuator's state in the diagnosis' state machine (suspect by S1, S2; cannot
+    /// judge by G2; a fault's class is also in `active`).
+    pub health: [Health; MAX_ACTUATORS],
+    /// Rate axes the calibrated model does not explain (rule G2), from the last calibration;
+    /// said once per calibration.
+    failing_axes: Vec<AxisFailure>,
+    failing_said: bool,
     /// Said once that an output channel carries no PWM.
     warned_missing_output: bool,
     /// The last calibration stretch's data could not support an estimate (`cannot_estimate`,
@@ -179,7 +185,9 @@ impl VehiclePipeline {
             last_sample_t: None,
             seen_grounded: false,
             active: [None; MAX_ACTUATORS],
-            suspect: [false; MAX_ACTUATORS],
+            health: [Health::Healthy; MAX_ACTUATORS],
+            failing_axes: Vec::new(),
+            failing_said: false,
             warned_missing_output: false,
             unsupported: false,
             announced_takeoff: None,
@@ -431,7 +439,7 @@ impl VehiclePipeline {
         self.airborne_since = None;
         self.announced_takeoff = None;
         self.active = [None; MAX_ACTUATORS];
-        self.suspect = [false; MAX_ACTUATORS];
+        self.health = [Health::Healthy; MAX_ACTUATORS];
         // The new boot's take-off is watched or not afresh.
         self.seen_grounded = false;
         self.warned.remove(gate::JOINED_WARNING);

@@ -7,7 +7,7 @@ use super::calibrating::StoredSample;
 use super::step::{Core, StepInput};
 use super::{Stage, VehiclePipeline};
 use crate::diagnose::decision::Decision;
-use crate::diagnose::vehicle::Diagnoser;
+use crate::diagnose::vehicle::{Diagnoser, Health};
 use crate::estimate::vehicle::build;
 use crate::model::MAX_ACTUATORS;
 use crate::model::calibrate::ScaledFit;
@@ -199,7 +199,7 @@ impl VehiclePipeline {
         r.core.step(&step, &mut self.counters, sink);
         for j in 0..r.l {
             self.active[j] = r.core.diag.active(j);
-            self.suspect[j] = r.core.diag.health(j) == crate::diagnose::vehicle::Health::Suspect;
+            self.health[j] = r.core.diag.health(j);
         }
         self.last = Some((s.t, r.core.est));
         if let Some(b) = &mut self.before_reboot {
@@ -268,7 +268,7 @@ impl VehiclePipeline {
                 ),
             );
             self.active = [None; MAX_ACTUATORS];
-            self.suspect = [false; MAX_ACTUATORS];
+            self.health = [Health::Healthy; MAX_ACTUATORS];
             self.last = None;
             return false;
         }
@@ -299,8 +299,33 @@ impl VehiclePipeline {
         let m = filters.measurements();
         let exogenous = filters.inputs() > l;
         let delay = calibrated.model.arx.as_ref().map_or(0, |a| a.delay);
-        let diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, calibrated, dt);
+        let mut diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, calibrated, dt);
         let last = samples.last().map(|s| (s.t, s.u));
+        if !self.failing_axes.is_empty() {
+            let t = last.map_or(0.0, |l| l.0);
+            let mut said = vec![];
+            if diag.cannot_judge(t, &self.failing_axes, &mut said) == 0 {
+                let axes = ["roll", "pitch", "yaw"];
+                let why = format!(
+                    "the calibrated model does not explain {} on the calibration stretch, and every actuator acts mostly there (rule G2): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
+                    (self.failing_axes.iter())
+                        .map(|f| format!("{} ({})", axes[f.axis], f.why))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    calibrated.name
+                );
+                // Nothing of this fit is to be kept (`ahcmon calibrate` writes none).
+                (self.fit, self.arx) = (None, None);
+                self.cannot_estimate(t, why, sink);
+                return false;
+            }
+            if !std::mem::replace(&mut self.failing_said, true) {
+                for d in &said {
+                    self.counters.decisions += 1;
+                    sink.decision(d);
+                }
+            }
+        }
         // Seed the command history and the last rates with the end of the healthy stretch.
         let mut u_history = [[0.0; MAX_ACTUATORS]; U_HISTORY];
         let tail = &samples[samples.len().saturating_sub(U_HISTORY)..];

@@ -145,6 +145,8 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
             MavSeverity::MAV_SEVERITY_WARNING,
             "AHC cannot estimate".into(),
         ),
+        // Not a fault, but the planner should know the actuator is not monitored.
+        Event::CannotJudge => (MavSeverity::MAV_SEVERITY_WARNING, fit("cannot judge", "")),
         Event::LinkLost | Event::LinkRestored => return None,
     };
     Some((sev, cut_bytes(text.trim(), TEXT_BYTES).to_string()))

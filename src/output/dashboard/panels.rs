@@ -2,7 +2,7 @@
 //! chart, the decision list, the footer with the link's counters, the help overlay.
 
 use super::{History, LinkInfo, UiState};
-use crate::diagnose::vehicle::{Decision, Event, FaultClass};
+use crate::diagnose::vehicle::{Decision, Event, FaultClass, Health};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::model::MAX_ACTUATORS;
 use crate::monitor::Monitor;
@@ -166,9 +166,12 @@ pub(super) fn actuator_table(
             .iter()
             .rev()
             .find(|d| Some(d.sysid) == sysid && d.actuator.as_deref() == Some(a.name.as_str()));
-        if p.active[j].is_none() && p.suspect[j] {
+        if p.active[j].is_none() && p.health[j] == Health::Suspect {
             state = "suspect".into();
             style = Style::default().fg(Color::Yellow);
+        } else if p.health[j] == Health::CannotJudge {
+            state = "cannot judge".into();
+            style = Style::default().fg(Color::DarkGray);
         } else if p.active[j].is_none() && last.is_some_and(|d| d.event == Event::ExcitationLow) {
             state = "excitation low".into();
             style = Style::default().fg(Color::Yellow);
@@ -337,9 +340,11 @@ pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], s
                 Event::Cleared | Event::LinkRestored | Event::SuspectCleared => {
                     Style::default().fg(Color::Green)
                 }
-                Event::LinkLost | Event::FilterReset | Event::CannotEstimate | Event::Suspect => {
-                    Style::default().fg(Color::Yellow)
-                }
+                Event::LinkLost
+                | Event::FilterReset
+                | Event::CannotEstimate
+                | Event::CannotJudge
+                | Event::Suspect => Style::default().fg(Color::Yellow),
                 Event::ExcitationLow => Style::default().fg(Color::DarkGray),
             };
             // The vehicle shown is the selected one: its id on every line only cuts the rest.
