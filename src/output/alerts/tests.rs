@@ -37,6 +37,15 @@ fn statustext_fits_and_names_the_actuator() {
     let (sev, text) = statustext(&d).unwrap();
     assert_eq!(text, "AHC motor5 bias +12% UKF+ESMF");
     assert_eq!(sev, MavSeverity::MAV_SEVERITY_ERROR);
+    // An actuator the model cannot judge (G2) is no fault, but the planner is told it is not
+    // monitored; the other statements stay off the planner.
+    let mut d = Decision::monitor(1.0, 1, Event::CannotJudge, "");
+    d.actuator = Some("rudder".into());
+    let (sev, text) = statustext(&d).unwrap();
+    assert_eq!(text, "AHC rudder cannot judge");
+    assert_eq!(sev, MavSeverity::MAV_SEVERITY_WARNING);
+    d.event = Event::ExcitationLow;
+    assert!(statustext(&d).is_none());
 }
 
 #[test]
