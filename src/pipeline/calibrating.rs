@@ -437,22 +437,7 @@ impl VehiclePipeline {
                 summary
             ),
         );
-        if !failing.is_empty() {
-            let axes = ["roll", "pitch", "yaw"];
-            sink.message(
-                self.sysid,
-                &format!(
-                    "warning: the calibrated model does not explain {} on the calibration stretch ({:.1} Hz): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; the actuators acting mostly there are not judged (cannot_judge, rule G2); give the vehicle's profile (--profile, ahcmon calibrate)",
-                    failing
-                        .iter()
-                        .map(|f| format!("{} ({})", axes[f.axis], f.why))
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    1.0 / dt,
-                    calibrated.name
-                ),
-            );
-        }
+        // Said where the actuators are judged or not (`running::start_stage`, rule G2).
         self.failing_axes = failing;
         self.failing_said = false;
         // A stretch cut short (by --calibrate-until / --calibrate-s) still fits, but loosely.

@@ -304,14 +304,15 @@ impl VehiclePipeline {
         if !self.failing_axes.is_empty() {
             let t = last.map_or(0.0, |l| l.0);
             let mut said = vec![];
+            let axes = ["roll", "pitch", "yaw"];
             if diag.cannot_judge(t, &self.failing_axes, &mut said) == 0 {
-                let axes = ["roll", "pitch", "yaw"];
                 let why = format!(
-                    "the calibrated model does not explain {} on the calibration stretch, and every actuator acts mostly there (rule G2): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
+                    "the calibrated model does not explain {} on the calibration stretch ({:.1} Hz), and every actuator acts mostly there (rule G2): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
                     (self.failing_axes.iter())
                         .map(|f| format!("{} ({})", axes[f.axis], f.why))
                         .collect::<Vec<_>>()
                         .join(", "),
+                    1.0 / dt,
                     calibrated.name
                 );
                 // Nothing of this fit is to be kept (`ahcmon calibrate` writes none).
@@ -320,6 +321,18 @@ impl VehiclePipeline {
                 return false;
             }
             if !std::mem::replace(&mut self.failing_said, true) {
+                sink.message(
+                    self.sysid,
+                    &format!(
+                        "warning: the calibrated model does not explain {} on the calibration stretch ({:.1} Hz): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; the actuators acting mostly there are not judged (cannot_judge, rule G2); give the vehicle's profile (--profile, ahcmon calibrate)",
+                        (self.failing_axes.iter())
+                            .map(|f| format!("{} ({})", axes[f.axis], f.why))
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                        1.0 / dt,
+                        calibrated.name
+                    ),
+                );
                 for d in &said {
                     self.counters.decisions += 1;
                     sink.decision(d);
