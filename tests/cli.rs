@@ -743,6 +743,39 @@ fn a_calibration_end_outside_the_flight_is_explained() {
     );
 }
 
+/// An actuator the calibrated model cannot judge (rule G2) is shown as such wherever its state
+/// is: its decision line, and the summary's state column (not "healthy"). The SITL quad's log
+/// replayed with the plane's profile: the second stretch's roll moved with nothing in the
+/// plane's geometry to explain it, and the aileron acts on roll alone.
+#[test]
+fn an_actuator_the_model_cannot_judge_is_said_so_in_the_decisions_and_the_summary() {
+    let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let (code, out, err) = ahcmon(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--profile",
+        "plane",
+        "--headless",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("cannot_judge  aileron (ch 1)  (100 % of its effect is on axes"),
+        "{out}"
+    );
+    let aileron = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("aileron ") && l.contains("mit-ukf"))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(
+        aileron.ends_with("cannot judge (the model does not explain its axes: see its decision)"),
+        "{aileron}"
+    );
+    assert!(
+        err.contains("the actuators acting mostly there are not judged"),
+        "{err}"
+    );
+}
+
 /// `calibrate` shows the warnings that concern the profile it writes (they were swallowed: a
 /// 2.6 s stretch or a helicopter profile on a quad went by unsaid), says why when the profile
 /// has outputs the vehicle lacks (not "it had landed"), and names a log's other vehicles.
