@@ -304,17 +304,23 @@ impl VehiclePipeline {
         if !self.failing_axes.is_empty() {
             let t = last.map_or(0.0, |l| l.0);
             let mut said = vec![];
+            // The axes, why each fails, and what that leaves to do.
             let axes = ["roll", "pitch", "yaw"];
+            let failing = format!(
+                "the calibrated model does not explain {} on the calibration stretch ({:.1} Hz)",
+                (self.failing_axes.iter())
+                    .map(|f| format!("{} ({})", axes[f.axis], f.why))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                1.0 / dt
+            );
+            let remedy = format!(
+                "the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
+                calibrated.name
+            );
             if diag.cannot_judge(t, &self.failing_axes, &mut said) == 0 {
-                let why = format!(
-                    "the calibrated model does not explain {} on the calibration stretch ({:.1} Hz), and every actuator acts mostly there (rule G2): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; give the vehicle's profile (--profile, ahcmon calibrate)",
-                    (self.failing_axes.iter())
-                        .map(|f| format!("{} ({})", axes[f.axis], f.why))
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    1.0 / dt,
-                    calibrated.name
-                );
+                let why =
+                    format!("{failing}, and every actuator acts mostly there (rule G2): {remedy}");
                 // Nothing of this fit is to be kept (`ahcmon calibrate` writes none).
                 (self.fit, self.arx) = (None, None);
                 self.cannot_estimate(t, why, sink);
@@ -324,13 +330,7 @@ impl VehiclePipeline {
                 sink.message(
                     self.sysid,
                     &format!(
-                        "warning: the calibrated model does not explain {} on the calibration stretch ({:.1} Hz): the profile ({}) may not be this vehicle's, the stream too slow for it, or the stretch not healthy flight; the actuators acting mostly there are not judged (cannot_judge, rule G2); give the vehicle's profile (--profile, ahcmon calibrate)",
-                        (self.failing_axes.iter())
-                            .map(|f| format!("{} ({})", axes[f.axis], f.why))
-                            .collect::<Vec<_>>()
-                            .join(", "),
-                        1.0 / dt,
-                        calibrated.name
+                        "warning: {failing}: the actuators acting mostly there are not judged (cannot_judge, rule G2); {remedy}"
                     ),
                 );
                 for d in &said {
