@@ -1,6 +1,7 @@
 //! The change test on the residual whitened by its learned colour: the colour (an AR(1)
 //! part seen through white noise, per row), its innovation filter, and the generalised
-//! likelihood ratio search of [`ChangeTest::evaluate`] run on the whitened residual.
+//! likelihood ratio search of [`ChangeTest::evaluate`] run on the whitened residual, and one
+//! actuator's gain against its offset there.
 
 use super::*;
 
@@ -319,5 +320,121 @@ impl Colour {
             };
         }
         w
+    }
+}
+
+impl ChangeTest {
+    /// Actuator `j`'s gain and offset changes over the newest `samples` stored, compared with
+    /// the residual whitened by its learned colour (generalised least squares; `None` until
+    /// the colour is learned). Wind and slow model error carry over from one sample to the
+    /// next, so the plain fit weighs what they share with a slowly moving command; whitened,
+    /// the command's sample-to-sample moves, where a gain and an offset differ, weigh in full.
+    /// No allocation.
+    pub fn whitened_gain_or_offset(&self, j: usize, samples: usize) -> Option<KindFit> {
+        self.whitened_gain_or_offset_within(j, samples, samples)
+    }
+
+    /// [`Self::whitened_gain_or_offset`] of a change `changed` samples old (at most the
+    /// store), fitted on the newest `samples` of them only: the regressors start at the
+    /// change, so that the fit on a later part of a change is not pulled towards healthy by
+    /// the whitening (which, running from the store's start, has partly predicted the change
+    /// away by then; tested), and fits on disjoint parts of one change pool (their sums are
+    /// those of the fit on all of them, split).
+    pub fn whitened_gain_or_offset_within(
+        &self,
+        j: usize,
+        changed: usize,
+        samples: usize,
+    ) -> Option<KindFit> {
+        if !self.colour_learned() || j >= self.effects.len() {
+            return None;
+        }
+        let (cap, rows) = (self.buf.len(), self.rows);
+        let n = samples.min(self.len);
+        if n < self.min_samples {
+            return None;
+        }
+        let w = self.colour.whitening(rows);
+        let b = &self.effects[j];
+        // Oldest of the stretch first: the residual's filter runs over the whole store (its
+        // state at the change is the healthy past's), each regressor's from zero at the
+        // change (zero before it), all with the same gains; the sums over the stretch.
+        let entry = |k: usize| &self.buf[(self.head + cap - self.len + k) % cap];
+        let start = self.len - n;
+        let change_start = self.len - changed.clamp(n, self.len);
+        let (mut pr, mut pg, mut po) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+        let mut pv = [0.0f64; 4];
+        for (p, wi) in pv.iter_mut().zip(&w) {
+            *p = wi.start();
+        }
+        let (mut gy, mut gx, mut oy, mut ox, mut base) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut go, mut su) = (0.0, 0.0);
+        for k in 0..self.len {
+            let e = entry(k);
+            let inside = k >= start;
+            let u = e.u[j];
+            if inside {
+                su += u;
+            }
+            for (i, wi) in w.iter().enumerate().take(rows) {
+                let (gain, scale, next) = wi.advance(pv[i]);
+                pv[i] = next;
+                let y = wi.apply(&mut pr[i], e.r[i], gain, scale);
+                if k < change_start {
+                    continue;
+                }
+                let g = wi.apply(&mut pg[i], b[i] * u, gain, scale);
+                let o = wi.apply(&mut po[i], b[i], gain, scale);
+                if !inside {
+                    continue;
+                }
+                gy += g * y;
+                gx += g * g;
+                oy += o * y;
+                ox += o * o;
+                go += g * o;
+                base += y * y;
+            }
+        }
+        if !(gx > 0.0 && ox > 0.0) {
+            return None;
+        }
+        let (gain_drop, offset_drop) = (gy * gy / gx, oy * oy / ox);
+        let det = gx * ox - go * go;
+        let pair =
+            (det > 1e-9 * gx * ox).then(|| ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det));
+        let mixed_drop = pair.map_or(gain_drop.max(offset_drop), |(a, d)| a * gy + d * oy);
+        let (kind, value, drop, other, ss) = if offset_drop > gain_drop {
+            (ChangeKind::Offset, oy / ox, offset_drop, gain_drop, ox)
+        } else {
+            (ChangeKind::Gain, 1.0 + gy / gx, gain_drop, offset_drop, gx)
+        };
+        let noise_var = ((base - drop) / (n * rows) as f64).max(0.0);
+        if !(noise_var > 0.0 && drop.is_finite() && mixed_drop.is_finite()) {
+            return None;
+        }
+        // Stuck at s: the output is s whatever the command, so the residual is s b - b u,
+        // and the whitened y + g is s times the whitened offset regressor.
+        let stuck_value = (oy + go) / ox;
+        let stuck_var =
+            ((base + 2.0 * gy + gx - stuck_value * (oy + go)) / (n * rows) as f64).max(0.0);
+        // The gain fitted with the offset free, in the pair's own residual noise.
+        let pair_var = ((base - mixed_drop) / (n * rows) as f64).max(0.0);
+        let (pair_gamma, pair_gamma_std) = pair.map_or((f64::NAN, f64::INFINITY), |(a, _)| {
+            (1.0 + a, (pair_var * ox / det).sqrt())
+        });
+        Some(KindFit {
+            kind,
+            value,
+            value_std: (noise_var / ss).sqrt(),
+            margin: (drop - other) / noise_var,
+            mixed_margin: (mixed_drop - drop) / noise_var,
+            command_mean: su / n as f64,
+            stuck_value,
+            stuck_std: (stuck_var / ox).sqrt(),
+            pair_gamma,
+            pair_gamma_std,
+            pair_delta: pair.map_or(f64::NAN, |(_, d)| d),
+        })
     }
 }

@@ -13,7 +13,7 @@ use super::EvalError;
 use super::oracle::{
     Alternative, DETECTABLE_LAMBDA, IsolationOracle, KindOracle, Oracle, OracleNoise,
 };
-use super::vehicle::sim_config;
+use super::vehicle::{mean_command_before, sim_config};
 use crate::diagnose::vehicle::{Decision, Event};
 use crate::estimate::vehicle::AhcEstimate;
 use crate::monitor::Monitor;
@@ -344,24 +344,6 @@ impl Sink for Collect {
     }
 }
 
-/// The mean command of actuator `j` over the 2 s before the onset, from the healthy flight
-/// (the fault changes nothing before it).
-fn trim_before_onset(healthy: &NamedScenario, seed: u64, j: usize) -> Result<f64, EvalError> {
-    let err = |e: String| EvalError::Sim(healthy.name.clone(), e);
-    let (cfg, _) = sim_config(healthy, seed)?;
-    let mut sim = VehicleSim::new(cfg).map_err(err)?;
-    let (mut sum, mut n) = (0.0, 0u32);
-    while sim.time() < ONSET_S {
-        let t = sim.time();
-        let s = sim.step();
-        if t >= ONSET_S - 2.0 {
-            sum += s.u[j];
-            n += 1;
-        }
-    }
-    Ok(sum / f64::from(n.max(1)))
-}
-
 /// Fly one case through the pipeline and score it.
 pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
     let vehicle =
@@ -376,7 +358,7 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
                 fault: None,
                 ..case.clone()
             };
-            trim_before_onset(&healthy.named(0.0)?, case.seed, j)?
+            mean_command_before(&healthy.named(0.0)?, case.seed, j, ONSET_S)?
         }
         _ => 0.0,
     };

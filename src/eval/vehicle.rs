@@ -276,6 +276,29 @@ pub fn run_vehicle_scenario(
     })
 }
 
+/// The mean command of actuator `j` over the 2 s before `onset_s`, from the healthy flight
+/// (a fault from then changes nothing before it): the trim a stuck output is put at.
+pub fn mean_command_before(
+    healthy: &NamedScenario,
+    seed: u64,
+    j: usize,
+    onset_s: f64,
+) -> Result<f64, EvalError> {
+    let err = |e: String| EvalError::Sim(healthy.name.clone(), e);
+    let (cfg, _) = sim_config(healthy, seed)?;
+    let mut sim = VehicleSim::new(cfg).map_err(err)?;
+    let (mut sum, mut n) = (0.0, 0u32);
+    while sim.time() < onset_s {
+        let t = sim.time();
+        let s = sim.step();
+        if t >= onset_s - 2.0 {
+            sum += s.u[j];
+            n += 1;
+        }
+    }
+    Ok(sum / f64::from(n.max(1)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
