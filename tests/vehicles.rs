@@ -470,10 +470,8 @@ fn gusty_calibrations(
 /// the healthy-flight scenarios. The autopilot reacts to what the wind did, so commands and
 /// rates are correlated with the wind's next push, which a plain fit mistakes for weaker
 /// actuators and less damping (x0.59-0.81 against a true 0.9 on roll and pitch, damping 10-30 %
-/// low, measured on these flights before the wind was modelled). With the wind modelled as a
-/// first-order disturbance, roll and pitch over 60 s land at a mean error of about 1.5 % (every
-/// one within 10 %), the damping within a few %. Yaw, weakly damped, stays noisy (factor
-/// 0.84-0.94, damping 0.5-2 against 1.1 and 1.65): not asserted.
+/// low). With each axis fitted by maximum likelihood with the wind as a state, roll and pitch
+/// over 60 s land at x0.875-0.905 (mean error 1.0 %), the damping at a mean error of 1.2 %.
 #[test]
 fn in_flight_calibration_is_not_fooled_by_gusts() {
     let (mut scale_err, mut damping_err, mut count) = (0.0, 0.0, 0.0);
@@ -508,15 +506,10 @@ fn in_flight_calibration_is_not_fooled_by_gusts() {
 }
 
 /// As [`in_flight_calibration_is_not_fooled_by_gusts`], over a link that loses one sample in
-/// ten. Six fit rows in ten remain; the wind-modelled fit differences across the holes, so it
-/// keeps all six. It used to keep the three with three consecutive rows before them: its
-/// standard error doubled, the Hausman-style choice fell back to the gust-biased plain fit
-/// (x0.61-0.69 where the truth is x0.9) and the factors were 13.2 % off on average. Measured
-/// now: 5.1 % (ten of the twelve within 0.05 of the truth; plane roll x0.67 on seed 2 and x1.07
-/// on seed 3; 5.0 % since the offset's fix below); the whole stream: 1.6 %. The bound sits
-/// between the two. Random loss (5 %) first left the offset unidentified across holes of
-/// differing length (a simulated quad's roll offset -15.9, R² -4.7, false faults before the
-/// onset); now every offset is within 0.22 of the truth and the factors 5.5 % off.
+/// ten: the fit predicts across each hole with the commands interpolated. Measured: x0.86-0.90
+/// against 0.9, mean error 2.1 % (the whole stream: 1.0 %). Random loss (5 %, holes of one to
+/// three samples): every offset within 0.23 of the truth, factors 1.4 % off. A fit that left
+/// the offset unidentified across holes put a simulated quad's roll offset at -15.9 (R² -4.7).
 #[test]
 fn in_flight_calibration_over_a_lossy_link_is_not_fooled_by_gusts() {
     let fits = gusty_calibrations(|k| k % 10 == 9);

@@ -55,8 +55,6 @@ pub(crate) const CLASS_MIN_S: f64 = 1.0;
 /// The change test's store (s, at most `change::MAX_STORE` samples) and its shortest fit.
 const CHANGE_HORIZON_S: f64 = 6.0;
 const CHANGE_MIN_S: f64 = 0.2;
-/// A telemetry hole longer than this clears the store: the vehicle did what nobody saw.
-const MAX_HOLE_S: f64 = 1.0;
 /// Memory of the residual's learned colour (s).
 const COLOUR_MEMORY_S: f64 = 60.0;
 /// While nothing is under way, the data are read this often (s): a quarter of `CLASS_MIN_S`,
@@ -342,17 +340,10 @@ impl Diagnoser {
             })
     }
 
-    /// A new flight or a restart: the stored residuals belong to another one.
+    /// A new flight, a restart or a hole the filters do not coast over: the stored residuals do
+    /// not chain with the next ones.
     pub fn residual_gap(&mut self) {
         self.change.clear();
-    }
-
-    /// Samples were lost over `span` seconds: a short hole keeps the store (the residuals on
-    /// either side are one-step residuals of the same flight), a longer one clears it.
-    pub fn samples_lost(&mut self, span: f64) {
-        if span.is_nan() || span > MAX_HOLE_S {
-            self.change.clear();
-        }
     }
 
     /// The change test's last reading (`None` while nothing is under way).

@@ -353,7 +353,8 @@ fn a_failed_calibration_is_tried_again_on_the_next_stretch() {
 
 /// One sample in ten lost during the calibration stretch: every lost sample is filled in
 /// (each hole is one period, well inside the bound), counted and said once, no gap is left,
-/// and the fit scales the axes as the fit on the whole stretch does.
+/// and the fit scales the axes as the fit on the whole stretch does (measured: within 0.004 on
+/// roll and pitch, 0.022 on the weakly damped yaw, whose factor spreads most).
 #[test]
 fn calibration_counts_the_holes_and_fits_around_them() {
     let (whole, said_whole, _) = fly_quad(false);
@@ -385,7 +386,7 @@ fn calibration_counts_the_holes_and_fits_around_them() {
     );
     let (a, b) = (whole.fit.unwrap().scale, lossy.fit.unwrap().scale);
     for axis in 0..3 {
-        assert!((a[axis] - b[axis]).abs() < 0.02, "scales {a:?} and {b:?}");
+        assert!((a[axis] - b[axis]).abs() < 0.03, "scales {a:?} and {b:?}");
     }
 }
 
@@ -483,12 +484,13 @@ fn a_fault_just_after_the_calibration_is_decided_at_once() {
     );
 }
 
-/// A fault inside the calibration stretch is fitted into its model, which then explains the
-/// stretch loosely: the diagnosis, run over it, decides something there, so it is said and the
-/// filters start cold at its end, with no decision of the stretch passed on.
+/// A fault in the last 0.6 s of the calibration stretch leaves its fit physical but is in the
+/// stretch: the diagnosis, run over it, decides something there, so it is said and the filters
+/// start cold at its end, with no decision of the stretch passed on. (A fault over more of the
+/// stretch leaves no fit that explains it: [`a_stretch_half_faulty_is_not_taken_for_the_vehicle`].)
 #[test]
 fn a_stretch_its_own_model_does_not_explain_starts_the_filters_cold() {
-    let loss = motor2_loss_from(13.0);
+    let loss = motor2_loss_from(22.4);
     let sink = fly_quad_faults(1200, vec![loss]);
     let said = sink
         .1
@@ -498,6 +500,32 @@ fn a_stretch_its_own_model_does_not_explain_starts_the_filters_cold() {
     let end = 23.0;
     assert!(
         !sink.0.iter().any(|d| d.t < end && !d.event.is_statement()),
+        "{:?}",
+        sink.0
+    );
+}
+
+/// A fault over half the calibration stretch: no one model of the vehicle explains it (roll
+/// fits worse than a constant; the healthy stretch of the same flight fits R² 0.98-0.99), so
+/// the vehicle cannot be estimated, said with the reason, and nothing is decided on it. A fit
+/// that took the fault for the vehicle's normal would judge the rest of the flight by it.
+#[test]
+fn a_stretch_half_faulty_is_not_taken_for_the_vehicle() {
+    let loss = motor2_loss_from(13.0);
+    let sink = fly_quad_faults(1200, vec![loss]);
+    let cannot: Vec<_> = sink
+        .0
+        .iter()
+        .filter(|d| d.event == Event::CannotEstimate)
+        .collect();
+    assert_eq!(cannot.len(), 1, "{:?}", sink.0);
+    let why = cannot[0].detail.as_deref().unwrap_or("");
+    assert!(
+        why.contains("does not explain") && why.contains("not healthy"),
+        "{why}"
+    );
+    assert!(
+        !sink.0.iter().any(|d| d.event == Event::Fault),
         "{:?}",
         sink.0
     );

@@ -160,6 +160,9 @@ pub struct VehicleSim {
     g_full: DMatrix<f64>,
     rng: Rng,
     omega: [f64; 3],
+    /// The last measured rates: what the autopilot's rate loop acts on (its gyro), as the
+    /// telemetry reports them.
+    measured_rates: [f64; 3],
     attitude: [f64; 3],
     w: f64,
     rate_integral: [f64; 3],
@@ -218,6 +221,7 @@ impl VehicleSim {
             g_full,
             rng,
             omega: [0.0; 3],
+            measured_rates: [0.0; 3],
             attitude: [0.0; 3],
             w: 0.0,
             rate_integral: [0.0; 3],
@@ -248,7 +252,8 @@ impl VehicleSim {
         r
     }
 
-    /// The autopilot: attitude P → rate PI with the nominal damping and trim fed forward →
+    /// The autopilot: attitude P → rate PI on the measured rates (its gyro; the attitude is
+    /// its estimator's, taken as true) with the nominal damping and trim fed forward →
     /// demanded accelerations → mixer → saturated commands.
     fn control(&mut self, t: f64) -> [f64; MAX_ACTUATORS] {
         let dt = self.cfg.dt;
@@ -260,12 +265,12 @@ impl VehicleSim {
         rate_target[2] = r[2];
         let mut demand = vec![0.0; self.rows];
         for i in 0..3 {
-            let e = rate_target[i] - self.omega[i];
+            let rate = self.measured_rates[i];
+            let e = rate_target[i] - rate;
             self.rate_integral[i] = (self.rate_integral[i] + e * dt).clamp(-2.0, 2.0);
-            demand[i] = RATE_P[i] * e
-                + RATE_I[i] * self.rate_integral[i]
-                + self.nominal.damping[i] * self.omega[i]
-                - self.nominal.offset[i];
+            demand[i] =
+                RATE_P[i] * e + RATE_I[i] * self.rate_integral[i] + self.nominal.damping[i] * rate
+                    - self.nominal.offset[i];
         }
         if self.rows == 4 {
             // Hold vertical speed at zero: a_z demand (down positive w, specific force up negative).
@@ -347,6 +352,7 @@ impl VehicleSim {
         let mut y = [0.0; 4];
         for i in 0..3 {
             y[i] = next[i] + self.cfg.gyro_noise * self.rng.normal();
+            self.measured_rates[i] = y[i];
         }
         if self.rows == 4 {
             y[3] = az + self.cfg.az_noise * self.rng.normal();
