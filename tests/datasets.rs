@@ -58,6 +58,69 @@ fn the_sitl_dataset_is_scored_against_its_truth() {
     assert!(out.contains("totals: 4 fault flights: 4 detected"), "{out}");
 }
 
+fn shared_data() -> PathBuf {
+    std::env::var_os("AHCMON_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| manifest("../shared/data"))
+}
+
+/// RflyMAD (PX4 SIL and HIL, motor 1 weakened to 0.0-0.6, then a crash): motor 1 is the first
+/// fault decision on every flight, after the onset and before the crash (not marked
+/// `in_crash`). The logs are external: missing, the test fails.
+#[test]
+fn rflymad_names_motor_1_first_and_before_the_crash() {
+    let dir = common::temp_dir("datasets_rflymad");
+    let json = dir.join("rflymad.json");
+    let truth = manifest("tests/datasets/rflymad.toml");
+    let data = shared_data();
+    assert!(
+        data.join("rflymad").is_dir(),
+        "the external data is missing: {} (set AHCMON_SHARED_DATA)",
+        data.display()
+    );
+    let (code, out, err) = ahcmon(&[
+        "benchmark",
+        truth.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let runs: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let cases = runs[0]["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 8);
+    for c in cases {
+        assert_eq!(c["outcome"], "detected", "{c}");
+        assert_eq!(c["faults_before_onset"], 0, "{c}");
+        assert_eq!(c["first_after_onset"]["actuator"], "motor1", "{c}");
+        // The first fault decision, read from the replay's own decisions: motor 1, before the
+        // crash.
+        let log = data.join(c["file"].as_str().unwrap());
+        let decisions = dir.join("decisions.jsonl");
+        let (code, out, err) = ahcmon(&[
+            "replay",
+            log.to_str().unwrap(),
+            "--calibrate-s",
+            "10",
+            "--headless",
+            "-q",
+            "--decisions",
+            decisions.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{out}{err}");
+        let text = std::fs::read_to_string(&decisions).unwrap();
+        let first = text
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .find(|d| d["class"].is_string())
+            .unwrap_or_else(|| panic!("{}: no fault decision", log.display()));
+        assert_eq!(first["actuator"], "motor1", "{}: {first}", log.display());
+        assert_ne!(first["in_crash"], true, "{}: {first}", log.display());
+    }
+}
+
 /// Every truth file parses (unknown keys are errors), and a log missing from `--data` stops
 /// the benchmark before anything is replayed or written.
 #[test]

@@ -22,8 +22,8 @@ pub(super) const U_HISTORY: usize = crate::telemetry::profile::MAX_ARX_DELAY + 1
 /// simulated healthy plane with a hole every 2 s, coasting gave 0 false decisions over 0.12 s
 /// holes but 2 over 0.16 s and 7 over 0.2 s ones, re-seating 0 for all; re-seating every hole
 /// instead slows detection on a randomly lossy link (20 % of frames lost: the plane's elevator
-/// fault found after 4.2 s, median, against 2.2 s). The diagnosis' change test keeps its
-/// residuals across a hole coasted over and starts over after a longer one.
+/// fault found after 4.2 s, median, against 2.2 s). The diagnosis' change test has its own
+/// limit to keep its residuals across a hole (`Diagnoser::samples_lost`).
 const MAX_COAST_S: f64 = 0.13;
 
 pub(super) struct Running {
@@ -120,6 +120,7 @@ impl VehiclePipeline {
         let mut increment_after_hole = None;
         if gap {
             self.counters.gaps += 1;
+            r.core.diag.samples_lost(span, r.dt);
             r.since_gap = 0;
             if span <= MAX_COAST_S {
                 // The filters predict over the lost periods, with the last outputs
@@ -157,10 +158,6 @@ impl VehiclePipeline {
                 // rate change over the hole read as an actuator fault), and the command
                 // history starts over. This sample only re-seats the filters.
                 r.core.filters.reseat(&s.rates, (span / r.dt).round());
-                // The change test's residuals do not chain across it either: the wind moved
-                // unseen, and its level after the hole read as a change at the seam (a
-                // healthy plane's aileron decided after a 0.5 s outage).
-                r.core.diag.residual_gap();
                 self.counters.reseats += 1;
                 tracing::debug!(
                     "sysid {}: {span:.3} s without a sample at t={:.2} s: the rates are re-measured",
