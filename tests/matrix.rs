@@ -45,3 +45,29 @@ fn the_fast_matrix_meets_the_detection_class_and_healthy_lines() {
         assert_eq!(fault, !c["oracle_lambda"].is_null(), "{c}");
     }
 }
+
+/// Rule T1: in 1.5 times the gusts the thresholds were set on (and 15 % mismatch), the plane's
+/// healthy flights are calibrated with their threshold raised by the gusts measured, and have
+/// no fault decision. Without the rule these two flights had 4 and 5 (elevator and rudder, F1).
+#[test]
+fn healthy_flights_in_stronger_gusts_keep_the_thresholds_false_alarm_rate() {
+    use ahcmon::eval::matrix::{Case, Flight, Weather, run_case};
+    for seed in [1, 3] {
+        let case = Case {
+            vehicle: "plane",
+            fault: None,
+            flight: Flight::Steady,
+            weather: Weather::Rough,
+            seed,
+            duration_s: 600.0,
+        };
+        let r = run_case(&case).unwrap();
+        assert!(!r.cannot_estimate && !r.cannot_judge, "{r:?}");
+        assert!(r.estimating_h > 0.15, "{r:?}");
+        assert_eq!(
+            r.false_decisions,
+            Vec::<(String, String)>::new(),
+            "seed {seed}"
+        );
+    }
+}

@@ -87,6 +87,24 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
                 current.map_or("-".into(), |t| format!("{t:.3}"))
             );
         }
+        // The reference of rule T1: the strongest gusts these flights' calibrations measured.
+        let axes: Vec<String> = c
+            .gusts
+            .iter()
+            .map(|g| g.map_or("-".into(), |g| format!("{g:.3}")))
+            .collect();
+        let current = profile
+            .as_ref()
+            .and_then(|p| p.diagnosis.gusts)
+            .map_or("-".into(), |g| {
+                format!("[{:.3}, {:.3}, {:.3}]", g[0], g[1], g[2])
+            });
+        outln!(
+            "{:<24} {:<12} gusts measured (rad/s², roll pitch yaw): strongest [{}], profile {current}",
+            c.scenario,
+            c.vehicle,
+            axes.join(", ")
+        );
     }
     Ok(())
 }

@@ -405,7 +405,7 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
     let mut deviation = [0.0; crate::model::MAX_ACTUATORS];
     let mut truth_at: Vec<(f64, f64, f64)> = vec![];
     let mut class_lambda_at: Vec<f64> = vec![];
-    fly(
+    let _ = fly(
         &named,
         case.seed,
         PipelineConfig::default(),
@@ -448,13 +448,13 @@ pub fn run_case(case: &Case) -> Result<CaseResult, EvalError> {
 /// Fly `named` with `seed` through the pipeline `replay` runs: the simulator's telemetry as
 /// the MAVLink messages an autopilot sends, into a [`Monitor`] with `config`. `on_sample` sees
 /// each sample (with its truth) before its messages are sent.
-fn fly(
+pub(super) fn fly(
     named: &NamedScenario,
     seed: u64,
     config: PipelineConfig,
     sink: &mut dyn Sink,
     mut on_sample: impl FnMut(&crate::sim::vehicle::VehicleSample),
-) -> Result<(), EvalError> {
+) -> Result<Monitor, EvalError> {
     let err = |e: String| EvalError::Sim(named.name.clone(), e);
     let (cfg, _) = sim_config(named, seed)?;
     let vehicle = cfg.profile.clone();
@@ -485,7 +485,7 @@ fn fly(
         prev = next;
     }
     monitor.finish(sink);
-    Ok(())
+    Ok(monitor)
 }
 
 fn score(

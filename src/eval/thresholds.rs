@@ -14,6 +14,7 @@ use super::vehicle::run_vehicle_scenario;
 use crate::diagnose::vehicle::{Decision, DiagnosisParams};
 use crate::estimate::vehicle::AhcEstimate;
 use crate::output::Sink;
+use crate::pipeline::PipelineConfig;
 use crate::scenario::NamedScenario;
 use crate::telemetry::Profile;
 use rayon::prelude::*;
@@ -42,7 +43,30 @@ pub struct ThresholdCalibration {
     pub gain_alarm_free: [Option<f64>; 2],
     pub max_abs_gain_gap: [f64; 2],
     pub gain_recommended: Option<f64>,
+    /// Per rate axis, the strongest gusts the in-flight calibration measured on these flights
+    /// (flown through the pipeline `replay` runs; rad/s²): the profile's `diagnosis.gusts`,
+    /// up to which the threshold's false-alarm rate holds (rule T1). Null where no flight's
+    /// fit measured the axis (a helicopter's identified model has no wind state).
+    pub gusts: [Option<f64>; 3],
 }
+
+/// The gusts the in-flight calibration measures on the first `GUST_FLIGHT_S` of `named` with
+/// `seed`, flown through the pipeline as a user's log is.
+fn measured_gusts(named: &NamedScenario, seed: u64) -> Result<[Option<f64>; 3], EvalError> {
+    struct Quiet;
+    impl Sink for Quiet {
+        fn decision(&mut self, _: &Decision) {}
+    }
+    let mut short = named.clone();
+    short.scenario.duration_s = short.scenario.duration_s.min(GUST_FLIGHT_S);
+    let monitor = super::matrix::fly(&short, seed, PipelineConfig::default(), &mut Quiet, |_| {})?;
+    Ok((monitor.pipelines.values())
+        .find_map(|p| p.fit.as_ref().map(|f| f.gusts))
+        .unwrap_or([None; 3]))
+}
+
+/// Long enough for the default calibration stretch (20 s from 3 s after take-off) to end.
+const GUST_FLIGHT_S: f64 = 40.0;
 
 /// The smallest threshold at which `S ← max(0, S + (|e|/threshold − 1) dt)` stays at or below
 /// `h` over the whole trace.
@@ -120,7 +144,7 @@ pub fn calibrate_threshold(
     }
     let dt = named.scenario.dt();
     // Per seed, statistic and filter: (alarm-free threshold, largest value).
-    type PerSeed = [[(f64, f64); 2]; 2];
+    type PerSeed = ([[(f64, f64); 2]; 2], [Option<f64>; 3]);
     let per_seed: Vec<Result<PerSeed, EvalError>> = seeds
         .par_iter()
         .map(|&seed| {
@@ -130,6 +154,7 @@ pub fn calibrate_threshold(
             };
             // An infinite threshold: no decision feeds back into the filters calibrated on.
             run_vehicle_scenario(named, seed, false, Some(f64::INFINITY), &mut sink)?;
+            let gusts = measured_gusts(named, seed)?;
             let mut out = [[(0.0f64, 0.0f64); 2]; 2];
             for (k, per_filter) in out.iter_mut().enumerate() {
                 for (f, slot) in per_filter.iter_mut().enumerate() {
@@ -140,13 +165,15 @@ pub fn calibrate_threshold(
                     }
                 }
             }
-            Ok(out)
+            Ok((out, gusts))
         })
         .collect();
     let mut alarm_free = [[0.0f64; 2]; 2];
     let mut max_abs = [[0.0f64; 2]; 2];
+    let mut per_flight_gusts = vec![];
     for r in per_seed {
-        let r = r?;
+        let (r, g) = r?;
+        per_flight_gusts.push(g);
         for k in 0..2 {
             for f in 0..2 {
                 alarm_free[k][f] = alarm_free[k][f].max(r[k][f].0);
@@ -164,6 +191,7 @@ pub fn calibrate_threshold(
         std::array::from_fn(|f| (max_abs[k][f] > 0.0).then_some(alarm_free[k][f]))
     };
     Ok(ThresholdCalibration {
+        gusts: strongest_gusts(&per_flight_gusts),
         scenario: named.name.clone(),
         vehicle: named.scenario.vehicle.clone(),
         seeds: seeds.to_vec(),
@@ -174,6 +202,21 @@ pub fn calibrate_threshold(
         max_abs_gain_gap: max_abs[1],
         gain_recommended: recommend(1),
     })
+}
+
+/// Rule T1's reference from the gusts measured on each flight: their mean per axis (the
+/// gusts' shape; one 20 s stretch reads an axis' gusts to about 20 %), scaled to the strongest
+/// flight's level (`DiagnosisSpec::gust_level` of its gusts against that shape): the threshold
+/// was alarm-free on every flight up to that level.
+fn strongest_gusts(flights: &[[Option<f64>; 3]]) -> [Option<f64>; 3] {
+    let shape: [Option<f64>; 3] = std::array::from_fn(|i| {
+        let seen: Vec<f64> = flights.iter().filter_map(|g| g[i]).collect();
+        (!seen.is_empty()).then(|| seen.iter().sum::<f64>() / seen.len() as f64)
+    });
+    let strongest = (flights.iter())
+        .filter_map(|g| crate::telemetry::profile::DiagnosisSpec::gust_level(g, &shape))
+        .fold(0.0f64, f64::max);
+    shape.map(|g| g.map(|g| g * strongest).filter(|g| *g > 0.0))
 }
 
 #[cfg(test)]

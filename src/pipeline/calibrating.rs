@@ -347,6 +347,8 @@ impl VehiclePipeline {
             axis,
             why: format!("R²={r2:.2}, worse than a constant"),
         };
+        // Said after the fit's summary: rule T1's raised threshold.
+        let mut gust_note = None;
         let (calibrated, fit, summary) = if let Some(arx) = identified {
             let mut calibrated = profile.clone();
             set_noise_from_fit(&mut calibrated, &arx.quality.residual_std, dt);
@@ -387,6 +389,21 @@ impl VehiclePipeline {
             };
             let mut calibrated = profile.with_rate_params(&fit.params);
             set_noise_from_fit(&mut calibrated, &fit.quality.residual_std, dt);
+            if let Some(factor) = calibrated.diagnosis.gust_factor(&fit.gusts) {
+                let spec = &mut calibrated.diagnosis;
+                let before = spec.threshold;
+                spec.threshold *= factor;
+                let show = |g: [Option<f64>; 3]| {
+                    g.map(|g| g.map_or("-".into(), |g| format!("{g:.2}")))
+                        .join(", ")
+                };
+                gust_note = Some(format!(
+                    "gusts x{factor:.2} the strongest the thresholds were set on (roll, pitch, yaw {} against {} rad/s²): the deviation threshold is raised from {before:.3} to {:.3}, to keep its false-alarm rate (rule T1)",
+                    show(fit.gusts),
+                    show(spec.gusts.map_or([None; 3], |g| g.map(Some))),
+                    spec.threshold
+                ));
+            }
             let axes = ["roll", "pitch", "yaw", "a_z"];
             for (i, (r2, scaled)) in (fit.quality.r_squared.iter().zip(&fit.scaled))
                 .take(3)
@@ -437,6 +454,9 @@ impl VehiclePipeline {
                 summary
             ),
         );
+        if let Some(note) = gust_note {
+            sink.message(self.sysid, &note);
+        }
         // Said where the actuators are judged or not (`running::start_stage`, rule G2).
         self.failing_axes = failing;
         self.failing_said = false;

@@ -103,6 +103,17 @@ pub(super) struct PemFit {
     pub whiteness: f64,
 }
 
+impl PemFit {
+    /// The wind as the gusts that make it: the stationary standard deviation of `w`
+    /// (`wind_std / √(1-φ²)`) over the step's hold `(1-a)/d` (`d = -ln a / dt`), an angular
+    /// acceleration (rad/s²) held over each step as the simulator's gusts are.
+    pub fn gust_std(&self, dt: f64) -> f64 {
+        let d = -self.a.ln() / dt;
+        let hold = (1.0 - self.a) / d;
+        self.wind_std / (1.0 - self.phi * self.phi).max(1e-12).sqrt() / hold
+    }
+}
+
 /// Lags of the innovations' whiteness check.
 pub(super) const WHITENESS_LAGS: usize = 10;
 

@@ -15,6 +15,10 @@ pub struct ScaledFit {
     pub scaled: Vec<bool>,
     /// Per axis: the factor applied to the profile's `G` row.
     pub scale: Vec<f64>,
+    /// Per rate axis (roll, pitch, yaw): the gusts the likelihood fit measured, the wind
+    /// state's stationary standard deviation as an angular acceleration (rad/s²), where that
+    /// fit was taken (its model holds on the axis); `None` elsewhere.
+    pub gusts: [Option<f64>; 3],
 }
 
 /// Identify a vehicle's magnitudes against a profile's geometry: per axis, one gain factor on
@@ -58,6 +62,7 @@ pub fn calibrate_scaled(
     };
     let mut scaled = vec![];
     let mut scale = vec![];
+    let mut gusts = [None; 3];
     let drive = |axis: usize, u: &[f64]| -> f64 {
         (0..l).map(|j| base.effectiveness[j][axis] * u[j]).sum()
     };
@@ -104,11 +109,14 @@ pub fn calibrate_scaled(
             .and_then(|f| {
                 let beta = DVector::from_column_slice(&[f.a, f.beta, f.c]);
                 let (r2, sd) = fit_quality(&x, &y, &beta);
-                physical((beta, r2, sd))
+                physical((beta, r2, sd)).map(|w| (w, f))
             });
         let fitted = match (plain, wind) {
-            (Some(p), Some(w)) if w.4 > MAX_WIND_MISFIT * p.4 => Some(p),
-            (_, Some(w)) => Some(w),
+            (Some(p), Some((w, _))) if w.4 > MAX_WIND_MISFIT * p.4 => Some(p),
+            (_, Some((w, f))) => {
+                gusts[axis] = Some(f.gust_std(dt));
+                Some(w)
+            }
             (p, None) => p,
         };
         match fitted {
@@ -174,6 +182,7 @@ pub fn calibrate_scaled(
         quality,
         scaled,
         scale,
+        gusts,
     })
 }
 

@@ -160,6 +160,12 @@ pub struct DiagnosisSpec {
     /// `ahcmon thresholds`: healthy values differ by a factor of three between vehicles).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gain_threshold: Option<f64>,
+    /// The strongest gusts of the healthy flights `threshold` was set on, per rate axis (roll,
+    /// pitch, yaw; the wind's standard deviation as an angular acceleration, rad/s², as the
+    /// in-flight calibration measures it): the threshold's false-alarm rate holds up to these
+    /// (rule T1, [`DiagnosisSpec::gust_factor`]). Absent: the threshold is not raised.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gusts: Option<[f64; 3]>,
 }
 
 impl Default for DiagnosisSpec {
@@ -167,7 +173,33 @@ impl Default for DiagnosisSpec {
         Self {
             threshold: 0.08,
             gain_threshold: None,
+            gusts: None,
         }
+    }
+}
+
+impl DiagnosisSpec {
+    /// Rule T1: the factor (over 1) by which the deviation threshold is raised for a flight
+    /// whose calibration measured `measured` gusts: their level against the profile's
+    /// `gusts` ([`Self::gust_level`]). A healthy actuator's deviation is the wind the filters
+    /// cannot tell from an offset; the rate model is linear, so it scales with the gusts, and a
+    /// threshold alarm-free under the reference gusts stays so under stronger ones scaled by
+    /// their ratio. Never lowered: a calmer flight keeps the threshold. The gain statistic is
+    /// not scaled: the MIT-UKF's bounds it reads widen with the noise the calibration measures.
+    pub fn gust_factor(&self, measured: &[Option<f64>; 3]) -> Option<f64> {
+        let reference = self.gusts?.map(Some);
+        Self::gust_level(measured, &reference).filter(|f| *f > 1.0 && f.is_finite())
+    }
+
+    /// The level of `measured` gusts against `reference` ones: the root mean square of their
+    /// ratios over the axes both have. Gusts scale together on every axis; one 20 s stretch
+    /// reads each axis to about 20 %, and the three together to about 12 %.
+    pub fn gust_level(measured: &[Option<f64>; 3], reference: &[Option<f64>; 3]) -> Option<f64> {
+        let ratios: Vec<f64> = (0..3)
+            .filter_map(|i| Some(measured[i]? / reference[i].filter(|r| *r > 0.0)?))
+            .collect();
+        (!ratios.is_empty())
+            .then(|| (ratios.iter().map(|r| r * r).sum::<f64>() / ratios.len() as f64).sqrt())
     }
 }
 
@@ -303,6 +335,11 @@ impl Profile {
             && !(g.is_finite() && g > 0.0)
         {
             return Err("diagnosis.gain_threshold must be positive".into());
+        }
+        if let Some(g) = self.diagnosis.gusts
+            && !g.iter().all(|v| v.is_finite() && *v > 0.0)
+        {
+            return Err("diagnosis.gusts must be positive".into());
         }
         // A geometry column scaled by a gain left out (0) cannot move: its gamma would read
         // healthy whatever the actuator does.

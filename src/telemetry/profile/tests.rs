@@ -90,3 +90,29 @@ fn missing_file_is_a_clear_error() {
     let e = Profile::resolve("octo-z").unwrap_err();
     assert!(e.to_string().contains("quad-x"), "{e}");
 }
+
+/// Rule T1: the threshold is raised by the gusts' level over the reference (the root mean
+/// square of the axes' ratios), never lowered, and not without a reference or a measurement.
+#[test]
+fn the_gust_factor_scales_with_the_measured_gusts() {
+    let spec = DiagnosisSpec {
+        gusts: Some([0.5, 0.5, 0.2]),
+        ..DiagnosisSpec::default()
+    };
+    let f = spec
+        .gust_factor(&[Some(0.75), Some(0.75), Some(0.3)])
+        .unwrap();
+    assert!((f - 1.5).abs() < 1e-12, "{f}");
+    // Pooled: ratios 1.2, 1.0 and an unmeasured axis give sqrt((1.44 + 1) / 2).
+    let f = spec.gust_factor(&[Some(0.6), Some(0.5), None]).unwrap();
+    assert!((f - (2.44f64 / 2.0).sqrt()).abs() < 1e-12, "{f}");
+    assert_eq!(spec.gust_factor(&[Some(0.4), Some(0.5), Some(0.2)]), None);
+    assert_eq!(spec.gust_factor(&[None; 3]), None);
+    assert_eq!(DiagnosisSpec::default().gust_factor(&[Some(5.0); 3]), None);
+    // A profile's reference must be positive.
+    let text = include_str!("../../../replay/profiles/plane.toml").replace(
+        "gusts = [0.575, 0.589, 0.178]",
+        "gusts = [0.575, 0.0, 0.178]",
+    );
+    assert!(Profile::from_toml(&text, "plane.toml").is_err());
+}
