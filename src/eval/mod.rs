@@ -2,6 +2,7 @@
 //! scored against the simulator's truth. Pure: printing and plotting live in `output/`.
 
 pub mod bank;
+pub mod bounds;
 pub mod datasets;
 pub mod matrix;
 pub mod matrix_report;
@@ -9,10 +10,10 @@ pub mod oracle;
 pub mod thresholds;
 pub mod vehicle;
 
-use crate::diagnose::{BoundsDetector, BoundsEvent};
 use crate::scenario::{NamedScenario, Scenario};
 use crate::sim::paper::{ESTIMATED, PaperSim};
 use bank::{BankNoise, FILTERS, paper_bank};
+use bounds::{BoundsDetector, BoundsEvent};
 use serde::Serialize;
 use std::time::Instant;
 

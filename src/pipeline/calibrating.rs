@@ -442,7 +442,14 @@ impl VehiclePipeline {
                     )
                 })
                 .collect();
-            (calibrated, Some(fit), summary.join(", "))
+            let mut summary = summary.join(", ");
+            if fit.gusts.iter().any(Option::is_some) {
+                let gusts = fit
+                    .gusts
+                    .map(|g| g.map_or("-".into(), |g| format!("{g:.2}")));
+                summary += &format!("; gusts {} rad/s²", gusts.join(", "));
+            }
+            (calibrated, Some(fit), summary)
         };
         let span = samples.last().map_or(0.0, |s| s.t) - samples[0].t;
         sink.message(
