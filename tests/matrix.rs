@@ -47,11 +47,13 @@ fn the_fast_matrix_meets_the_detection_class_and_healthy_lines() {
 }
 
 /// Rule T1: in 1.5 times the gusts the thresholds were set on (and 15 % mismatch), the plane's
-/// healthy flights are calibrated with their threshold raised by the gusts measured, and have
-/// no fault decision. Without the rule these two flights had 4 and 5 (elevator and rudder, F1).
+/// healthy flights are calibrated with their threshold raised by the gusts measured (the
+/// replay says so), and have no fault decision (with the profile's threshold unraised these two
+/// flights have 4 and 5, elevator and rudder, F1).
 #[test]
 fn healthy_flights_in_stronger_gusts_keep_the_thresholds_false_alarm_rate() {
     use ahcmon::eval::matrix::{Case, Flight, Weather, run_case};
+    let dir = common::temp_dir("matrix_t1");
     for seed in [1, 3] {
         let case = Case {
             vehicle: "plane",
@@ -69,5 +71,35 @@ fn healthy_flights_in_stronger_gusts_keep_the_thresholds_false_alarm_rate() {
             Vec::<(String, String)>::new(),
             "seed {seed}"
         );
+        // The same flight as a file, replayed: the calibration raised the threshold.
+        let scenario = dir.join(format!("rough-{seed}.toml"));
+        let tlog = dir.join(format!("rough-{seed}.tlog"));
+        let mut short = case.clone();
+        short.duration_s = 40.0;
+        std::fs::write(&scenario, short.scenario_toml(0.0)).unwrap();
+        let args = [
+            "sim",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--tlog",
+            tlog.to_str().unwrap(),
+            "-q",
+        ];
+        let (code, _, err) = ahcmon(&args);
+        assert_eq!(code, 0, "{err}");
+        let (code, _, err) = ahcmon(&["replay", tlog.to_str().unwrap(), "--headless"]);
+        assert_eq!(code, 0, "{err}");
+        let line = err
+            .lines()
+            .find(|l| l.contains("(rule T1)"))
+            .unwrap_or_else(|| panic!("seed {seed}: no T1 in {err}"));
+        let factor: f64 = line
+            .split("gusts x")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(factor > 1.1, "seed {seed}: {line}");
     }
 }

@@ -87,7 +87,8 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
                 current.map_or("-".into(), |t| format!("{t:.3}"))
             );
         }
-        // The reference of rule T1: the strongest gusts these flights' calibrations measured.
+        // The reference of rule T1: the gusts these flights' calibrations measured, the axes' means
+        // at the strongest flight's level.
         let axes: Vec<String> = c
             .gusts
             .iter()
@@ -100,7 +101,7 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
                 format!("[{:.3}, {:.3}, {:.3}]", g[0], g[1], g[2])
             });
         outln!(
-            "{:<24} {:<12} gusts measured (rad/s², roll pitch yaw): strongest [{}], profile {current}",
+            "{:<24} {:<12} gusts (rule T1; rad/s², roll pitch yaw): [{}], profile {current}",
             c.scenario,
             c.vehicle,
             axes.join(", ")

@@ -340,20 +340,10 @@ impl Diagnoser {
             })
     }
 
-    /// A new flight or a restart: the stored residuals belong to another one.
+    /// A new flight, a restart or a long hole: the stored residuals do not chain with the next
+    /// ones.
     pub fn residual_gap(&mut self) {
         self.change.clear();
-    }
-
-    /// Samples were lost over `span` seconds (the period is `dt`): the store is kept across one
-    /// lost sample, or a hole up to the change test's shortest fit (`CHANGE_MIN_S`), and cleared
-    /// after a longer one. Over a longer hole the wind's level moves unseen, and its level after
-    /// it read as a change beginning at the seam (a healthy plane's aileron decided after 0.5 s
-    /// outages); one lost sample is what a 10 Hz stream loses now and then.
-    pub fn samples_lost(&mut self, span: f64, dt: f64) {
-        if span.is_nan() || span > CHANGE_MIN_S.max(2.5 * dt) {
-            self.change.clear();
-        }
     }
 
     /// The change test's last reading (`None` while nothing is under way).

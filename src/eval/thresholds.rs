@@ -43,9 +43,10 @@ pub struct ThresholdCalibration {
     pub gain_alarm_free: [Option<f64>; 2],
     pub max_abs_gain_gap: [f64; 2],
     pub gain_recommended: Option<f64>,
-    /// Per rate axis, the strongest gusts the in-flight calibration measured on these flights
-    /// (flown through the pipeline `replay` runs; rad/s²): the profile's `diagnosis.gusts`,
-    /// up to which the threshold's false-alarm rate holds (rule T1). Null where no flight's
+    /// Per rate axis, the gusts the in-flight calibration measured on these flights (flown
+    /// through the pipeline `replay` runs; rad/s²), the axes' means at the strongest flight's
+    /// level: the profile's `diagnosis.gusts`, up to which the threshold's false-alarm rate
+    /// holds (rule T1). Null where no flight's
     /// fit measured the axis (a helicopter's identified model has no wind state).
     pub gusts: [Option<f64>; 3],
 }

@@ -9,6 +9,7 @@ use crate::diagnose::vehicle::gate::AxisFailure;
 use crate::model::MAX_ACTUATORS;
 use crate::model::calibrate::{CalibrationSample, calibrate_arx, calibrate_scaled};
 use crate::output::Sink;
+use crate::telemetry::profile::MAX_GUST_FACTOR;
 use crate::telemetry::profile::{Dynamics, VehicleKind};
 use crate::telemetry::{Profile, TelemetrySample};
 
@@ -389,19 +390,27 @@ impl VehiclePipeline {
             };
             let mut calibrated = profile.with_rate_params(&fit.params);
             set_noise_from_fit(&mut calibrated, &fit.quality.residual_std, dt);
+            // Rule T1, applied where the diagnosis starts (`running::start_stage`): said here,
+            // after the fit's summary. The profile keeps the threshold it was calibrated with.
             if let Some(factor) = calibrated.diagnosis.gust_factor(&fit.gusts) {
-                let spec = &mut calibrated.diagnosis;
-                let before = spec.threshold;
-                spec.threshold *= factor;
+                let spec = &calibrated.diagnosis;
                 let show = |g: [Option<f64>; 3]| {
                     g.map(|g| g.map_or("-".into(), |g| format!("{g:.2}")))
                         .join(", ")
                 };
+                let capped = if factor >= MAX_GUST_FACTOR {
+                    format!(
+                        " (at most x{MAX_GUST_FACTOR}: stronger gusts are beyond what the rule was checked on, and may be a slow drift rather than gusts)"
+                    )
+                } else {
+                    String::new()
+                };
                 gust_note = Some(format!(
-                    "gusts x{factor:.2} the strongest the thresholds were set on (roll, pitch, yaw {} against {} rad/s²): the deviation threshold is raised from {before:.3} to {:.3}, to keep its false-alarm rate (rule T1)",
+                    "gusts x{factor:.2} those the thresholds were set on (roll, pitch, yaw {} against {} rad/s²): the deviation threshold is raised from {:.3} to {:.3}{capped}, to keep its false-alarm rate (rule T1)",
                     show(fit.gusts),
                     show(spec.gusts.map_or([None; 3], |g| g.map(Some))),
-                    spec.threshold
+                    spec.threshold,
+                    spec.threshold * factor
                 ));
             }
             let axes = ["roll", "pitch", "yaw", "a_z"];

@@ -22,8 +22,8 @@ pub(super) const U_HISTORY: usize = crate::telemetry::profile::MAX_ARX_DELAY + 1
 /// simulated healthy plane with a hole every 2 s, coasting gave 0 false decisions over 0.12 s
 /// holes but 2 over 0.16 s and 7 over 0.2 s ones, re-seating 0 for all; re-seating every hole
 /// instead slows detection on a randomly lossy link (20 % of frames lost: the plane's elevator
-/// fault found after 4.2 s, median, against 2.2 s). The diagnosis' change test has its own
-/// limit to keep its residuals across a hole (`Diagnoser::samples_lost`).
+/// fault found after 4.2 s, median, against 2.2 s). The diagnosis' change test keeps its
+/// residuals across a hole coasted over or one lost sample, and starts over after a longer one.
 const MAX_COAST_S: f64 = 0.13;
 
 pub(super) struct Running {
@@ -120,7 +120,12 @@ impl VehiclePipeline {
         let mut increment_after_hole = None;
         if gap {
             self.counters.gaps += 1;
-            r.core.diag.samples_lost(span, r.dt);
+            // The change test's residuals chain across a hole the filters coast over or one
+            // lost sample (what a 10 Hz stream loses now and then); over a longer hole the wind
+            // moves unseen, and its level after it would read as a change at the seam.
+            if span.is_nan() || span > MAX_COAST_S.max(2.5 * r.dt) {
+                r.core.diag.residual_gap();
+            }
             r.since_gap = 0;
             if span <= MAX_COAST_S {
                 // The filters predict over the lost periods, with the last outputs
@@ -300,6 +305,13 @@ impl VehiclePipeline {
         let exogenous = filters.inputs() > l;
         let delay = calibrated.model.arx.as_ref().map_or(0, |a| a.delay);
         let mut diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, calibrated, dt);
+        // Rule T1: the deviation threshold raised by the gusts this flight's calibration
+        // measured (said at the calibration); a profile used as identified has no fit, and none.
+        if let Some(factor) =
+            (self.fit.as_ref()).and_then(|f| calibrated.diagnosis.gust_factor(&f.gusts))
+        {
+            diag.params.threshold *= factor;
+        }
         let last = samples.last().map(|s| (s.t, s.u));
         if !self.failing_axes.is_empty() {
             let t = last.map_or(0.0, |l| l.0);

@@ -160,9 +160,10 @@ pub struct DiagnosisSpec {
     /// `ahcmon thresholds`: healthy values differ by a factor of three between vehicles).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gain_threshold: Option<f64>,
-    /// The strongest gusts of the healthy flights `threshold` was set on, per rate axis (roll,
-    /// pitch, yaw; the wind's standard deviation as an angular acceleration, rad/s², as the
-    /// in-flight calibration measures it): the threshold's false-alarm rate holds up to these
+    /// The gusts of the healthy flights `threshold` was set on, per rate axis (roll, pitch,
+    /// yaw; the wind's standard deviation as an angular acceleration, rad/s², as the in-flight
+    /// calibration measures it; the axes' means at the strongest flight's level): the
+    /// threshold's false-alarm rate holds up to these
     /// (rule T1, [`DiagnosisSpec::gust_factor`]). Absent: the threshold is not raised.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gusts: Option<[f64; 3]>,
@@ -178,17 +179,25 @@ impl Default for DiagnosisSpec {
     }
 }
 
+/// Rule T1 raises a threshold at most this much. The rule was checked on gusts 1.5 times the
+/// reference; a wind state read at over twice it on a 20 s stretch is more likely a slow drift,
+/// whose long time constant the fit extrapolates to a large spread, than gusts.
+pub const MAX_GUST_FACTOR: f64 = 2.0;
+
 impl DiagnosisSpec {
     /// Rule T1: the factor (over 1) by which the deviation threshold is raised for a flight
     /// whose calibration measured `measured` gusts: their level against the profile's
     /// `gusts` ([`Self::gust_level`]). A healthy actuator's deviation is the wind the filters
     /// cannot tell from an offset; the rate model is linear, so it scales with the gusts, and a
     /// threshold alarm-free under the reference gusts stays so under stronger ones scaled by
-    /// their ratio. Never lowered: a calmer flight keeps the threshold. The gain statistic is
-    /// not scaled: the MIT-UKF's bounds it reads widen with the noise the calibration measures.
+    /// their ratio (at most [`MAX_GUST_FACTOR`]). Never lowered: a calmer flight keeps the
+    /// threshold. The gain statistic is not scaled: the MIT-UKF's bounds it reads widen with
+    /// the noise the calibration measures.
     pub fn gust_factor(&self, measured: &[Option<f64>; 3]) -> Option<f64> {
         let reference = self.gusts?.map(Some);
-        Self::gust_level(measured, &reference).filter(|f| *f > 1.0 && f.is_finite())
+        Self::gust_level(measured, &reference)
+            .filter(|f| *f > 1.0 && !f.is_nan())
+            .map(|f| f.min(MAX_GUST_FACTOR))
     }
 
     /// The level of `measured` gusts against `reference` ones: the root mean square of their

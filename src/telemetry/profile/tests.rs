@@ -107,6 +107,8 @@ fn the_gust_factor_scales_with_the_measured_gusts() {
     let f = spec.gust_factor(&[Some(0.6), Some(0.5), None]).unwrap();
     assert!((f - (2.44f64 / 2.0).sqrt()).abs() < 1e-12, "{f}");
     assert_eq!(spec.gust_factor(&[Some(0.4), Some(0.5), Some(0.2)]), None);
+    // Never more than MAX_GUST_FACTOR.
+    assert_eq!(spec.gust_factor(&[Some(5.0); 3]), Some(MAX_GUST_FACTOR));
     assert_eq!(spec.gust_factor(&[None; 3]), None);
     assert_eq!(DiagnosisSpec::default().gust_factor(&[Some(5.0); 3]), None);
     // A profile's reference must be positive.
