@@ -13,14 +13,13 @@ fn manifest(rel: &str) -> PathBuf {
 
 use common::ahcmon;
 
-/// Each SITL flight's fault is named on its own output after the onset, none before: the
-/// baseline of docs/results.md, which the diagnosis redesign must keep.
-#[test]
-fn the_sitl_dataset_is_scored_against_its_truth() {
-    let dir = common::temp_dir("datasets_sitl");
-    let json = dir.join("sitl.json");
-    let truth = manifest("tests/datasets/sitl.toml");
-    let data = manifest("replay/tlogs");
+/// `ahcmon benchmark TRUTH --data DATA --json` in a fresh folder: its JSON and its table.
+fn benchmark(
+    name: &str,
+    truth: &std::path::Path,
+    data: &std::path::Path,
+) -> (serde_json::Value, String) {
+    let json = common::temp_dir(name).join("out.json");
     let (code, out, err) = ahcmon(&[
         "benchmark",
         truth.to_str().unwrap(),
@@ -30,8 +29,19 @@ fn the_sitl_dataset_is_scored_against_its_truth() {
         json.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{out}{err}");
-    let runs: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let runs = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    (runs, out)
+}
+
+/// Each SITL flight's fault is named on its own output after the onset, none before: the
+/// baseline of docs/results.md, which the diagnosis redesign must keep.
+#[test]
+fn the_sitl_dataset_is_scored_against_its_truth() {
+    let (runs, out) = benchmark(
+        "datasets_sitl",
+        &manifest("tests/datasets/sitl.toml"),
+        &manifest("replay/tlogs"),
+    );
     let sitl = &runs[0];
     assert_eq!(sitl["dataset"], "sitl");
     let cases = sitl["cases"].as_array().unwrap();
@@ -71,26 +81,18 @@ fn shared_data() -> PathBuf {
 #[test]
 #[ignore = "the external logs: cargo test --release --test datasets -- --ignored"]
 fn rflymad_names_motor_1_first_and_before_the_crash() {
-    let dir = common::temp_dir("datasets_rflymad");
-    let json = dir.join("rflymad.json");
-    let truth = manifest("tests/datasets/rflymad.toml");
     let data = shared_data();
     assert!(
         data.join("rflymad").is_dir(),
         "the external data is missing: {} (set AHCMON_SHARED_DATA)",
         data.display()
     );
-    let (code, out, err) = ahcmon(&[
-        "benchmark",
-        truth.to_str().unwrap(),
-        "--data",
-        data.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{out}{err}");
-    let runs: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let (runs, _) = benchmark(
+        "datasets_rflymad",
+        &manifest("tests/datasets/rflymad.toml"),
+        &data,
+    );
+    let dir = common::temp_dir("datasets_rflymad_replays");
     let cases = runs[0]["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 8);
     for c in cases {

@@ -114,6 +114,36 @@ impl PemFit {
     }
 }
 
+/// The wind after a restart `steps` periods on (0: unknown): the share `φ^steps` of its
+/// estimate that carries over (none for an unknown span), and its variance, which relaxes
+/// towards the stationary one by the same share.
+fn restarted_wind(phi: f64, steps: u64, stationary: f64, p11: f64) -> (f64, f64) {
+    let carry = if steps == 0 {
+        0.0
+    } else {
+        phi.powi(steps.min(i32::MAX as u64) as i32)
+    };
+    (
+        carry,
+        carry * carry * p11 + (1.0 - carry * carry) * stationary,
+    )
+}
+
+/// One step of the state's covariance `(P00, P01, P11)` (rate, wind) in units of `r`: the rate
+/// takes `a` of itself and the wind, the wind `φ` of itself and a fresh push of variance `q`.
+fn predicted_covariance(
+    a: f64,
+    phi: f64,
+    q: f64,
+    (p00, p01, p11): (f64, f64, f64),
+) -> (f64, f64, f64) {
+    (
+        a * a * p00 + 2.0 * a * p01 + p11,
+        phi * (a * p01 + p11),
+        phi * phi * p11 + q,
+    )
+}
+
 /// Lags of the innovations' whiteness check.
 pub(super) const WHITENESS_LAGS: usize = 10;
 
@@ -175,15 +205,11 @@ fn innovations(rows: &[Row], p: &[f64; 3], beta: f64, c: f64) -> Vec<f64> {
     for row in rows {
         let steps = match row.link {
             Link::Restart(steps) => {
-                let carry = if steps == 0 {
-                    0.0
-                } else {
-                    phi.powi(steps.min(i32::MAX as u64) as i32)
-                };
+                let carry;
+                (carry, p11) = restarted_wind(phi, steps, stationary, p11);
                 x0 = row.y;
                 x1 *= carry;
                 (p00, p01) = (1.0, 0.0);
-                p11 = carry * carry * p11 + (1.0 - carry * carry) * stationary;
                 prev_g = row.g;
                 continue;
             }
@@ -194,10 +220,7 @@ fn innovations(rows: &[Row], p: &[f64; 3], beta: f64, c: f64) -> Vec<f64> {
             let g = prev_g + (row.g - prev_g) * i as f64 / steps as f64;
             x0 = a * x0 + x1 + beta * g + c;
             x1 *= phi;
-            let n00 = a * a * p00 + 2.0 * a * p01 + p11;
-            let n01 = phi * (a * p01 + p11);
-            let n11 = phi * phi * p11 + q;
-            (p00, p01, p11) = (n00, n01, n11);
+            (p00, p01, p11) = predicted_covariance(a, phi, q, (p00, p01, p11));
         }
         prev_g = row.g;
         if row.link == Link::Filled {
@@ -268,18 +291,13 @@ fn concentrated(rows: &[Row], p: &[f64; 3]) -> Option<Concentrated> {
     for row in rows {
         let steps = match row.link {
             Link::Restart(steps) => {
-                let carry = phi.powi(steps.min(i32::MAX as u64) as i32);
+                let carry;
+                (carry, p11) = restarted_wind(phi, steps, stationary, p11);
                 for (run, xr) in x.iter_mut().enumerate() {
                     xr[0] = if run == 0 { row.y } else { 0.0 };
                     xr[1] *= carry;
                 }
-                p00 = 1.0;
-                p01 = 0.0;
-                p11 = if steps == 0 {
-                    stationary
-                } else {
-                    carry * carry * p11 + (1.0 - carry * carry) * stationary
-                };
+                (p00, p01) = (1.0, 0.0);
                 prev_g = row.g;
                 continue;
             }
@@ -292,10 +310,7 @@ fn concentrated(rows: &[Row], p: &[f64; 3]) -> Option<Concentrated> {
                 xr[0] = a * xr[0] + xr[1] + input;
                 xr[1] *= phi;
             }
-            let n00 = a * a * p00 + 2.0 * a * p01 + p11;
-            let n01 = phi * (a * p01 + p11);
-            let n11 = phi * phi * p11 + q;
-            (p00, p01, p11) = (n00, n01, n11);
+            (p00, p01, p11) = predicted_covariance(a, phi, q, (p00, p01, p11));
         }
         prev_g = row.g;
         if row.link == Link::Filled {
