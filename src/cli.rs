@@ -37,7 +37,11 @@ pub enum Command {
     /// `alarm-free ukf` / `alarm-free set`, the smallest threshold at which the MIT-UKF's / the
     /// MIT-ESMF's statistic raised no alarm on any flight; `max ukf` / `max set`, the largest
     /// value of that statistic seen after the warm-up; `recommended`, 1.25 × the larger
-    /// alarm-free threshold; `profile`, the built-in profile's threshold now ("-": none).
+    /// alarm-free threshold; `profile`, the built-in profile's threshold now ("-": none). A
+    /// third row gives the gusts the in-flight calibration measured on the same flights (roll,
+    /// pitch, yaw in rad/s², the axes' means at the strongest flight's level): the profile's
+    /// `diagnosis.gusts`, against which a flight in stronger gusts has its threshold raised
+    /// (rule T1).
     Thresholds(ThresholdsArgs),
     /// Fly a vehicle scenario in the simulator (with the monitor's filters and diagnosis
     /// running on it), print its decisions as they are made, and write its ground truth,
