@@ -71,17 +71,21 @@ impl Diagnoser {
         out: &mut Vec<Decision>,
     ) {
         let alarms = self.actuators[j].alarms();
-        let best = self
-            .reading
-            .filter(|_| !self.reading_scanned)
-            .map(|r| r.actuator);
+        // The data's best fit, of what is under way. An offset of this actuator under the
+        // threshold (`is_fault_size`) measures the change smaller than a fault: the wind
+        // imitates one up to that size, and the alarm is the filters' reading of it.
+        let reading = self.reading.filter(|_| !self.reading_scanned);
+        let measured_small = reading.is_some_and(|r| {
+            r.actuator == j && r.kind == ChangeKind::Offset && !self.is_fault_size(&r)
+        });
+        let best = reading.map(|r| r.actuator).filter(|_| !measured_small);
         // The data name another actuator clearly: this alarm is its evidence, even when that
         // actuator's fault is in force (the filters spread a fault over other actuators for as
         // long as it lasts; a second fault under it is listed in its `also`).
         let named_other = named.filter(|&k| k != j);
         if alarms == 0 {
             self.actuators[j].contradicted_at = f64::NEG_INFINITY;
-        } else if named_other.is_some() {
+        } else if named_other.is_some() || measured_small {
             self.actuators[j].contradicted_at = t;
         }
         let st = &self.actuators[j];

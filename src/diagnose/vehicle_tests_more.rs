@@ -300,3 +300,26 @@ fn c1_a_pair_within_the_stuck_tolerance_keeps_a_stuck_class() {
     f.fly(0.0, 14.0, dithered(4, 0.5, 0.1), est, Some(&change));
     assert_eq!(f.last_class(), Some(FaultClass::Stuck), "{:?}", f.decisions);
 }
+
+#[test]
+fn f1_f2_a_change_the_data_measure_as_no_fault_is_no_evidence() {
+    // Plane, from 8 s the MIT-UKF reads the elevator's offset at 0.10 ± 0.01, past the
+    // threshold (0.065). The data change by `offset` there. Under the threshold (what stronger
+    // gusts than the thresholds' make the MIT-UKF follow) they measure no fault: nothing is
+    // decided, and F2's wait restarts while they fit it so. At a fault's size F1 decides at once.
+    let run = |offset: f64| {
+        let mut f = Flight::new("plane");
+        let est = faulted(3, 8.0, &[(1, estimate(1.0, 0.05, 0.1, 0.01))]);
+        let change = move |t: f64, _: &[f64]| (1usize, if t >= 8.0 { offset } else { 0.0 });
+        f.fly(0.0, 16.0, dithered(3, 0.05, 0.05), est, Some(&change));
+        let readings = f.d.reading().map(|r| (r.actuator, r.kind, r.value));
+        let first = f.events(Event::Fault).first().map(|d| (d.t, d.rule));
+        (first, readings)
+    };
+    let (first, reading) = run(0.03);
+    assert_eq!(first, None, "{reading:?}");
+    let (first, reading) = run(0.12);
+    let (t, rule) = first.unwrap_or_else(|| panic!("not decided: {reading:?}"));
+    assert_eq!(rule, Some(Rule::F1));
+    assert!(t < 9.0, "{t}");
+}
