@@ -210,8 +210,6 @@ pub struct ChangeTest {
     buf: Vec<Entry>,
     head: usize,
     len: usize,
-    /// Samples stored since the test was made (a clock for stretches that outlive the store).
-    stored: u64,
     /// The shortest changed stretch considered (samples).
     min_samples: usize,
     /// The residual's colour, learned on healthy stretches and on identified faults (see [`Colour`]).
@@ -260,7 +258,6 @@ impl ChangeTest {
             ],
             head: 0,
             len: 0,
-            stored: 0,
             min_samples: min_samples.max(2),
             colour: Colour {
                 memory: colour_memory.max(1),
@@ -349,7 +346,6 @@ impl ChangeTest {
         self.buf[self.head] = e;
         self.head = (self.head + 1) % cap;
         self.len = (self.len + 1).min(cap);
-        self.stored += 1;
     }
 
     /// Forget the stored residuals (a gap in the telemetry, a restart).
@@ -361,21 +357,6 @@ impl ChangeTest {
     /// Whether the residual's colour has been learned (the test whitens with it).
     pub fn colour_learned(&self) -> bool {
         self.colour.learned >= self.colour.needed
-    }
-
-    /// Samples stored so far (all of them, not only those kept).
-    pub fn stored(&self) -> u64 {
-        self.stored
-    }
-
-    /// The shortest stretch fitted.
-    pub fn min_samples(&self) -> usize {
-        self.min_samples
-    }
-
-    /// The most samples kept.
-    pub fn capacity(&self) -> usize {
-        self.buf.len()
     }
 
     pub fn len(&self) -> usize {

@@ -143,45 +143,6 @@ fn hover_change(kind: ChangeKind, theta: f64, seed: u64) -> ChangeTest {
     test
 }
 
-/// A loss older than the store, fitted on the store's newest part: with the regressors from
-/// the change (the store's start) the fit is the loss (to the little noise in the store);
-/// with the regressors
-/// from the part's start, the whitening has partly predicted the loss away and the fit is
-/// pulled towards healthy.
-#[test]
-fn a_later_part_of_a_change_fits_it_with_the_regressors_from_the_change() {
-    let mut rng = Rng::new(5);
-    let mut test = ChangeTest::new(effects(), [1.0; 4], 3, 300, 10, 3000);
-    let u = |k: usize| [0.5 + 0.2 * (0.07 * k as f64).sin(), 0.5, 0.5];
-    for (k, r) in coloured(&mut rng, 1000, 0.98, 0.1, 0.02).iter().enumerate() {
-        test.push(k as f64 * 0.02, r, &u(k), true);
-    }
-    assert!(test.colour_learned());
-    let (gamma, b) = (0.5, effects()[0]);
-    for k in 1000..1400 {
-        let s = (gamma - 1.0) * u(k)[0];
-        // (A little sensor noise: a residual the fit explains exactly has no spread.)
-        let r: [f64; 4] = std::array::from_fn(|i| b[i] * s + 1e-5 * rng.normal());
-        test.push(k as f64 * 0.02, &r, &u(k), false);
-    }
-    let len = test.len();
-    for part in [30, 100, 150] {
-        let within = test.whitened_gain_or_offset_within(0, len, part).unwrap();
-        assert_eq!(within.kind, ChangeKind::Gain);
-        assert!(
-            (within.value - gamma).abs() < 1e-3,
-            "{part}: {}",
-            within.value
-        );
-        let from_part = test.whitened_gain_or_offset(0, part).unwrap();
-        assert!(
-            (from_part.value - gamma).abs() > 0.05,
-            "{part}: {}",
-            from_part.value
-        );
-    }
-}
-
 #[test]
 fn a_hovering_motors_gain_and_offset_are_told_apart_on_the_whitened_residual() {
     // An offset of -0.15 at a command of 0.5 moves the output as a gain of 0.7 does.

@@ -331,21 +331,6 @@ impl ChangeTest {
     /// the command's sample-to-sample moves, where a gain and an offset differ, weigh in full.
     /// No allocation.
     pub fn whitened_gain_or_offset(&self, j: usize, samples: usize) -> Option<KindFit> {
-        self.whitened_gain_or_offset_within(j, samples, samples)
-    }
-
-    /// [`Self::whitened_gain_or_offset`] of a change `changed` samples old (at most the
-    /// store), fitted on the newest `samples` of them only: the regressors start at the
-    /// change, so that the fit on a later part of a change is not pulled towards healthy by
-    /// the whitening (which, running from the store's start, has partly predicted the change
-    /// away by then; tested), and fits on disjoint parts of one change pool (their sums are
-    /// those of the fit on all of them, split).
-    pub fn whitened_gain_or_offset_within(
-        &self,
-        j: usize,
-        changed: usize,
-        samples: usize,
-    ) -> Option<KindFit> {
         if !self.colour_learned() || j >= self.effects.len() {
             return None;
         }
@@ -356,12 +341,11 @@ impl ChangeTest {
         }
         let w = self.colour.whitening(rows);
         let b = &self.effects[j];
-        // Oldest of the stretch first: the residual's filter runs over the whole store (its
-        // state at the change is the healthy past's), each regressor's from zero at the
-        // change (zero before it), all with the same gains; the sums over the stretch.
+        // Oldest first: the residual's filter runs over the whole store (its state at the
+        // stretch's start is the healthy past's), each regressor's from zero at the stretch's
+        // start (zero before it), all with the same gains; the sums over the stretch.
         let entry = |k: usize| &self.buf[(self.head + cap - self.len + k) % cap];
         let start = self.len - n;
-        let change_start = self.len - changed.clamp(n, self.len);
         let (mut pr, mut pg, mut po) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
         let mut pv = [0.0f64; 4];
         for (p, wi) in pv.iter_mut().zip(&w) {
@@ -380,14 +364,11 @@ impl ChangeTest {
                 let (gain, scale, next) = wi.advance(pv[i]);
                 pv[i] = next;
                 let y = wi.apply(&mut pr[i], e.r[i], gain, scale);
-                if k < change_start {
+                if !inside {
                     continue;
                 }
                 let g = wi.apply(&mut pg[i], b[i] * u, gain, scale);
                 let o = wi.apply(&mut po[i], b[i], gain, scale);
-                if !inside {
-                    continue;
-                }
                 gy += g * y;
                 gx += g * g;
                 oy += o * y;

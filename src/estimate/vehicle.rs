@@ -111,8 +111,8 @@ pub trait VehicleFilters: Send {
     /// and the MIT-UKF, which takes the gusts for white noise, lets them pick its split and
     /// then wander with them (the gusts move the commands the controller makes against them);
     /// the change test reads the split from how the output follows the command, weighing the
-    /// gusts' colour, over the samples since the change (its store's, with the fits on earlier
-    /// stores of the same fault pooled in: `Diagnoser::identified`). So during the
+    /// gusts' colour, over the samples since the change (at most its store's:
+    /// `Diagnoser::identified`). So during the
     /// identification that follows a fault decision, each step the data clearly fit the kind
     /// of the class in force, the actuator's gamma and delta are reseated from that fit, of
     /// the kind first taken only: a later change of class is the diagnosis' to make, partly
