@@ -71,13 +71,14 @@ impl Diagnoser {
         out: &mut Vec<Decision>,
     ) {
         let alarms = self.actuators[j].alarms();
-        // The data's best fit, of what is under way. An offset of this actuator under the
-        // threshold (`is_fault_size`) measures the change smaller than a fault: the wind
-        // imitates one up to that size, and the alarm is the filters' reading of it.
+        // The data's best fit, of what is under way. An offset under the threshold
+        // (`is_fault_size`) measures the change smaller than a fault: the wind imitates one up
+        // to that size. On this actuator it is no evidence for F1, and on any it restarts F2's
+        // wait: the data see no change of a fault's size, and the alarm is the filters'
+        // reading of the wind.
         let reading = self.reading.filter(|_| !self.reading_scanned);
-        let measured_small = reading.is_some_and(|r| {
-            r.actuator == j && r.kind == ChangeKind::Offset && !self.is_fault_size(&r)
-        });
+        let small = reading.filter(|r| r.kind == ChangeKind::Offset && !self.is_fault_size(r));
+        let measured_small = small.is_some_and(|r| r.actuator == j);
         let best = reading.map(|r| r.actuator).filter(|_| !measured_small);
         // The data name another actuator clearly: this alarm is its evidence, even when that
         // actuator's fault is in force (the filters spread a fault over other actuators for as
@@ -85,7 +86,7 @@ impl Diagnoser {
         let named_other = named.filter(|&k| k != j);
         if alarms == 0 {
             self.actuators[j].contradicted_at = f64::NEG_INFINITY;
-        } else if named_other.is_some() || measured_small {
+        } else if named_other.is_some() || small.is_some() {
             self.actuators[j].contradicted_at = t;
         }
         let st = &self.actuators[j];
