@@ -53,6 +53,7 @@ mod mit_esmf;
 mod mit_ukf;
 mod ukf;
 pub mod vehicle;
+pub mod zonotope;
 
 pub use esmf::{
     Esmf, EsmfOutcome, EsmfParams, ShapeStep, predict_shape, remainder_box, scale_block, shape_step,
