@@ -36,6 +36,10 @@ pub struct Scenario {
     pub gyro_noise: Option<f64>,
     #[serde(default)]
     pub az_noise: Option<f64>,
+    /// Vehicle scenarios: the gusts' driving noise and the sensor noise uniform (bounded at
+    /// `√3` times the stated standard deviation) instead of Gaussian.
+    #[serde(default)]
+    pub bounded_noise: bool,
     #[serde(default)]
     pub gusts: Option<Gusts>,
     #[serde(default)]

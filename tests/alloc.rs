@@ -182,6 +182,7 @@ fn vehicle_filter_steps_allocate_nothing() {
         faults: vec![],
         gyro_noise: 0.003,
         az_noise: 0.3,
+        bounded_noise: false,
         seed: 1,
     })
     .unwrap();

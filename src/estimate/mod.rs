@@ -45,15 +45,16 @@ macro_rules! impl_estimator {
     };
 }
 
+pub mod ahc_set;
 mod esmf;
 mod kf_ukf;
 pub mod linalg;
 mod mit;
 mod mit_esmf;
 mod mit_ukf;
+pub mod polygon;
 mod ukf;
 pub mod vehicle;
-pub mod zonotope;
 
 pub use esmf::{
     Esmf, EsmfOutcome, EsmfParams, ShapeStep, predict_shape, remainder_box, scale_block, shape_step,

@@ -1,8 +1,10 @@
-//! The two monitoring filters (MIT-UKF and MIT-ESMF) on a vehicle's rate-effectiveness model,
-//! behind one object-safe face so the rest of ahcmon does not care how many actuators a vehicle
+//! The two monitoring filters (MIT-UKF and MIT-ESMF, the detectors the diagnosis reads) and the
+//! set-membership filter (the guaranteed bounds: `ahc_set`) on a vehicle's rate-effectiveness
+//! model, behind one object-safe face so the rest of ahcmon does not care how many actuators a vehicle
 //! has. Sizes are fixed at compile time (allocation-free steps); [`build`] picks the size that
 //! fits the profile.
 
+use super::ahc_set::{AhcSet, LAGS};
 use super::{
     AdaptationParams, EsmfParams, Estimator, EstimatorError, IdentifyParams, MitEsmf, MitUkf,
     UkfParams,
@@ -12,52 +14,12 @@ use crate::telemetry::Profile;
 use nalgebra::{SMatrix, SVector};
 use thiserror::Error;
 
-/// Filter names in the order of [`VehicleFilters`]' filter index.
-pub const FILTER_NAMES: [&str; 2] = ["mit-ukf", "mit-esmf"];
+/// Filter names in the order of [`VehicleFilters`]' filter index: the two detectors, then the
+/// set-membership filter ([`VehicleFilters::guaranteed`]).
+pub const FILTER_NAMES: [&str; 3] = ["mit-ukf", "mit-esmf", "set"];
 
 /// Initial 1σ uncertainty of the rates (rad/s), gamma and delta (normalised command).
 pub const INITIAL_STD: [f64; 3] = [0.1, 0.1, 0.05];
-
-/// One actuator's health estimate from one filter.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct AhcEstimate {
-    pub gamma: f64,
-    pub gamma_lo: f64,
-    pub gamma_hi: f64,
-    pub delta: f64,
-    pub delta_lo: f64,
-    pub delta_hi: f64,
-    /// The 2×2 block of the covariance (UKF) or shape (ESMF) of (gamma, delta):
-    /// `[gg, gd, dd]`.
-    pub block: [f64; 3],
-    /// Adapted process noise of gamma and delta.
-    pub q_gamma: f64,
-    pub q_delta: f64,
-    /// The effective output deviation at the operating point that the measurements attribute
-    /// to this actuator (filled in by the diagnosis; see `diagnose::vehicle`). Unlike
-    /// `(gamma - 1) u + delta` it does not wander along what the measurements cannot see.
-    pub deviation: f64,
-    /// The same for the command's excursions about the operating point, `(gamma - 1) σ_u`:
-    /// the deviation statistic is `hypot(deviation, excursion)`.
-    pub excursion: f64,
-    /// How far the healthy gain lies outside the filter's gamma bounds, at the reference
-    /// deflection (`DiagnosisParams::gain_ref`), attributed like `deviation`: the gain
-    /// statistic of angle outputs (see `diagnose::vehicle`).
-    pub gain_gap: f64,
-}
-
-impl AhcEstimate {
-    /// `(a - h)ᵀ B⁻¹ (a - h)` of the estimate against the healthy point h = (1, 0).
-    pub fn distance2(&self) -> f64 {
-        let (dg, dd) = (self.gamma - 1.0, self.delta);
-        let [a, b, c] = self.block;
-        let det = a * c - b * b;
-        if det.is_nan() || det <= 0.0 {
-            return 0.0;
-        }
-        (c * dg * dg - 2.0 * b * dg * dd + a * dd * dd) / det
-    }
-}
 
 #[derive(Debug, Error)]
 pub enum BuildError {
@@ -91,6 +53,16 @@ pub trait VehicleFilters: Send {
     /// What the healthy model (gamma = 1, delta = 0) fails to predict of `y` from the previous
     /// measured rates and this step's inputs (same `u` as `step`): `[p, q, r(, a_z)]`, unweighted.
     fn healthy_residual(&self, rates_prev: &[f64; 3], u: &[f64], y: &[f64]) -> [f64; 4];
+    /// The set filter's bounds of the healthy residual (lag 0) and of its changes over
+    /// [`LAGS`], and each actuator's mean command, as a calibration stretch measured them; the
+    /// set filter starts again from its a priori box.
+    fn set_residual_bounds(
+        &mut self,
+        bounds: [[f64; 4]; LAGS.len()],
+        command_ref: [f64; MAX_ACTUATORS],
+    );
+    /// Actuator `j`'s guaranteed estimate: the set-membership filter's.
+    fn guaranteed(&self, j: usize) -> AhcEstimate;
     /// The normalised innovation square (UKF) or `M (1 - consistency)` (ESMF) of the last step.
     fn nis(&self, filter: usize) -> f64;
     /// Re-initialise one filter (after repeated numerical failure).
@@ -194,18 +166,24 @@ const IDENTIFY_AFTER_S: f64 = 3.0;
 /// in steps with a fault in force (lost samples do not count).
 const RELEASE_TO_DECISION_S: f64 = 2.0;
 
+#[path = "vehicle_estimate.rs"]
+mod ahc_estimate;
+pub use ahc_estimate::AhcEstimate;
+use ahc_estimate::{estimate, set_estimate};
+
 #[path = "vehicle_follow.rs"]
 mod follow;
 use follow::fit_entries;
 
 #[path = "vehicle_setup.rs"]
 mod setup;
-pub use setup::{FilterSetup, residual_weights, weighted_effects};
+pub use setup::{FilterSetup, SET_DRIFT_PER_S, residual_weights, weighted_effects};
 
-/// MIT-UKF and MIT-ESMF of one size.
+/// MIT-UKF, MIT-ESMF and the set-membership filter of one size.
 pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
     pub ukf: MitUkf<RateModel<N, M>, N, M, S>,
     pub esmf: MitEsmf<RateModel<N, M>, N, M>,
+    pub set: AhcSet<N, M>,
     setup: FilterSetup<N, M>,
     /// Per actuator, whether its identification is awaited or followed (see
     /// [`VehicleFilters::hold_class`]).
@@ -231,6 +209,7 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
         Self {
             ukf: Self::new_ukf(&setup, adapt),
             esmf: Self::new_esmf(&setup, adapt),
+            set: Self::new_set(&setup),
             setup,
             following: [Following::Idle; MAX_ACTUATORS],
             steps: 0,
@@ -270,6 +249,19 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
         f
     }
 
+    fn new_set(s: &FilterSetup<N, M>) -> AhcSet<N, M> {
+        let l = (N - 3) / 2;
+        let mut lo = [[0.0; 2]; MAX_ACTUATORS];
+        let mut hi = [[0.0; 2]; MAX_ACTUATORS];
+        for j in 0..l {
+            for (c, i) in [3 + j, 3 + l + j].into_iter().enumerate() {
+                lo[j][c] = s.box_centre[i] - s.box_half[i];
+                hi[j][c] = s.box_centre[i] + s.box_half[i];
+            }
+        }
+        AhcSet::new(s.model, s.set_params, &lo[..l], &hi[..l])
+    }
+
     fn new_esmf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitEsmf<RateModel<N, M>, N, M> {
         let mut f = MitEsmf::new(
             s.model,
@@ -293,33 +285,6 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
         f.esmf.box_centre = s.box_centre;
         f.esmf.box_half = s.box_half;
         f
-    }
-}
-
-fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
-    f: &E,
-    p: &SMatrix<f64, N, N>,
-    l: usize,
-    j: usize,
-) -> AhcEstimate {
-    let (gi, di) = (3 + j, 3 + l + j);
-    let x = f.state();
-    let (gamma_lo, gamma_hi) = f.bounds(gi);
-    let (delta_lo, delta_hi) = f.bounds(di);
-    let q = f.process_noise();
-    AhcEstimate {
-        gamma: x[gi],
-        gamma_lo,
-        gamma_hi,
-        delta: x[di],
-        delta_lo,
-        delta_hi,
-        block: [p[(gi, gi)], p[(gi, di)], p[(di, di)]],
-        q_gamma: q[gi],
-        q_delta: q[di],
-        deviation: 0.0,
-        excursion: 0.0,
-        gain_gap: 0.0,
     }
 }
 
@@ -348,14 +313,18 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         // cores; the calling thread takes the (heavier) set filter, so the other core has the
         // time it needs to pick up the UKF. Outside one (the live monitor at 50 Hz) handing
         // the work to the pool would cost more than it saves, so they run in turn.
-        if rayon::current_thread_index().is_some() {
+        let out = if rayon::current_thread_index().is_some() {
             let (b, a) = rayon::join(|| esmf.try_step(u, &y).map(|_| ()), || ukf.try_step(u, &y));
             [a, b]
         } else {
             [ukf.try_step(u, &y), esmf.try_step(u, &y).map(|_| ())]
-        }
+        };
+        // The set filter's own failure (non-finite arithmetic) restarts it from its box.
+        let _ = self.set.try_step(u, &y);
+        out
     }
     fn coast(&mut self, u: &[f64]) -> [Result<(), EstimatorError>; 2] {
+        let _ = self.set.coast(u);
         [self.ukf.coast(u), self.esmf.coast(u)]
     }
     fn reseat(&mut self, rates: &[f64; 3], periods: f64) {
@@ -364,6 +333,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             .reseat(rates, &[r[(0, 0)], r[(1, 1)], r[(2, 2)]], periods);
         self.esmf
             .reseat(rates, &[sr[(0, 0)], sr[(1, 1)], sr[(2, 2)]], periods);
+        self.set.reseat(rates, periods);
     }
     fn healthy_residual(&self, rates_prev: &[f64; 3], u: &[f64], y: &[f64]) -> [f64; 4] {
         use crate::model::Model;
@@ -384,6 +354,18 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             out[3] = 0.0;
         }
         out
+    }
+    fn set_residual_bounds(
+        &mut self,
+        bounds: [[f64; 4]; LAGS.len()],
+        command_ref: [f64; MAX_ACTUATORS],
+    ) {
+        self.setup.set_params.residual_bound = bounds;
+        self.setup.set_params.command_ref = command_ref;
+        self.set = Self::new_set(&self.setup);
+    }
+    fn guaranteed(&self, j: usize) -> AhcEstimate {
+        set_estimate(&self.set, j)
     }
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate {
         let l = self.actuators();
@@ -449,6 +431,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         super::esmf::add_jump_set_on(&mut self.esmf.esmf.p, &self.setup.set_p0, &[gi, di]);
         self.esmf.esmf.intersect_box();
         self.esmf.schedule.restart();
+        self.set.forget(j);
     }
     fn set_fault_in_force(&mut self, in_force: bool) {
         self.ukf.ukf.consider = [false; N];
@@ -561,6 +544,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             self.was_identifying = false;
         } else {
             self.esmf = Self::new_esmf(&self.setup, adapt);
+            self.set.restart();
         }
     }
 }

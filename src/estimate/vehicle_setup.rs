@@ -2,6 +2,7 @@
 //! each actuator's weighted effect on the measurements (which the diagnosis shares).
 
 use super::*;
+use crate::estimate::ahc_set::{AhcSetParams, LAGS};
 
 /// Delta of range outputs (motors, throttle): random-walk std and prior std, as fractions of
 /// the profile's (see `FilterSetup::from_profile`).
@@ -25,7 +26,23 @@ pub struct FilterSetup<const N: usize, const M: usize> {
     /// effect), delta within the command range (+-1 for a range output, +-2 about trim).
     pub box_centre: SVector<f64, N>,
     pub box_half: SVector<f64, N>,
+    /// The set-membership filter's stated bounds (until a calibration stretch measures them:
+    /// `VehicleFilters::set_residual_bounds`).
+    pub set_params: AhcSetParams,
 }
+
+/// Without a calibration stretch's measurement, the bound of a row's healthy residual is this
+/// many times the standard deviation the Kalman filter assumes for it (a Gaussian exceeds 4σ on
+/// 6e-5 of samples), and of its change over any lag twice that.
+const STATED_BOUND_SIGMAS: f64 = 4.0;
+
+/// The fraction of its effect a calibrated model may be off by on each actuator (the set
+/// filter's gains are bounded relative to the model within it).
+pub const SET_MODEL_ERROR: f64 = 0.1;
+
+/// Largest change per second of a gain or an offset the set filter follows without a
+/// contradiction: a ramp to gain 0.6 over 8 s.
+pub const SET_DRIFT_PER_S: f64 = 0.05;
 
 impl<const N: usize, const M: usize> FilterSetup<N, M> {
     pub fn from_profile(profile: &Profile, dt: f64) -> Result<Self, RateModelError> {
@@ -82,6 +99,22 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             std_r[3] = noise.az;
         }
         let (n, m) = (N as f64, M as f64);
+        let rate_sd = (std_q[0] * std_q[0] + 2.0 * std_r[0] * std_r[0]).sqrt();
+        let mut level = [STATED_BOUND_SIGMAS * rate_sd; 4];
+        level[3] = if M == 4 {
+            STATED_BOUND_SIGMAS * std_r[3]
+        } else {
+            0.0
+        };
+        let mut residual_bound = [level.map(|b| 2.0 * b); LAGS.len()];
+        residual_bound[0] = level;
+        let set_params = AhcSetParams {
+            residual_bound,
+            drift_gamma: SET_DRIFT_PER_S * dt,
+            drift_delta: SET_DRIFT_PER_S * dt,
+            model_error: SET_MODEL_ERROR,
+            command_ref: [0.0; crate::model::MAX_ACTUATORS],
+        };
         // Set filters: the 3σ box of each noise enclosed by an ellipsoid (dimension × box²).
         Ok(Self {
             x0: model.healthy_state([0.0; 3]),
@@ -94,6 +127,7 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             fixed,
             box_centre,
             box_half,
+            set_params,
             model,
         })
     }

@@ -335,7 +335,7 @@ impl Sink for Collect {
         self.decisions.push(d.clone());
     }
 
-    fn estimates(&mut self, t: f64, _sysid: u8, est: &[&[AhcEstimate]; 2], _p: &Profile) {
+    fn estimates(&mut self, t: f64, _sysid: u8, est: &[&[AhcEstimate]; 3], _p: &Profile) {
         self.first_estimate.get_or_insert(t);
         self.last_estimate = t;
         if let Some(e) = self.target.and_then(|j| est[0].get(j)) {

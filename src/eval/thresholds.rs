@@ -108,11 +108,12 @@ struct Collect {
 }
 
 impl Sink for Collect {
-    fn estimates(&mut self, t: f64, _: u8, est: &[&[AhcEstimate]; 2], _: &Profile) {
+    fn estimates(&mut self, t: f64, _: u8, est: &[&[AhcEstimate]; 3], _: &Profile) {
         if t < self.warmup_s {
             return;
         }
-        for (f, row) in est.iter().enumerate() {
+        // The detectors' statistics (the set filter decides nothing).
+        for (f, row) in est.iter().take(2).enumerate() {
             for (k, traces) in self.traces.iter_mut().enumerate() {
                 if traces[f].len() < row.len() {
                     traces[f].resize(row.len(), Vec::new());

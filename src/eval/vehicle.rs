@@ -64,6 +64,7 @@ pub fn sim_config(
         dither: scn.attitude_dither.clone(),
         manoeuvres: scn.manoeuvres.clone(),
         faults: scn.faults.clone(),
+        bounded_noise: scn.bounded_noise,
         seed,
     };
     Ok((cfg, monitor))

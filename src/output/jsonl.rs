@@ -65,8 +65,13 @@ pub struct ActuatorEstimate<'a> {
     pub delta: f64,
     pub delta_lo: f64,
     pub delta_hi: f64,
-    /// Effective output deviation the measurements attribute to this actuator.
-    pub deviation: f64,
+    /// Effective output deviation the measurements attribute to this actuator (the detectors'
+    /// statistic; none for the set filter).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub deviation: Option<f64>,
+    /// The set filter: whether the gamma, the delta bounds are still the a priori box's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unexcited: Option<[bool; 2]>,
 }
 
 #[derive(Debug, Serialize)]
@@ -102,7 +107,8 @@ impl<'a> EstimateRecord<'a> {
                     delta: e.delta,
                     delta_lo: e.delta_lo,
                     delta_hi: e.delta_hi,
-                    deviation: e.deviation,
+                    deviation: (filter < 2).then_some(e.deviation),
+                    unexcited: (filter == 2).then_some(e.unexcited),
                 })
                 .collect(),
         }
@@ -291,7 +297,7 @@ impl Sink for Outputs {
         self.record(d);
     }
 
-    fn estimates(&mut self, t: f64, sysid: u8, est: &[&[AhcEstimate]; 2], profile: &Profile) {
+    fn estimates(&mut self, t: f64, sysid: u8, est: &[&[AhcEstimate]; 3], profile: &Profile) {
         if let Some(p) = self.plot.as_mut() {
             p.record(t, sysid, est, profile);
         }

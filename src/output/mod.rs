@@ -22,7 +22,7 @@ pub trait Sink {
     /// restored, a filter reset).
     fn decision(&mut self, d: &Decision);
     /// Every filter step: both filters' estimates per actuator.
-    fn estimates(&mut self, _t: f64, _sysid: u8, _est: &[&[AhcEstimate]; 2], _profile: &Profile) {}
+    fn estimates(&mut self, _t: f64, _sysid: u8, _est: &[&[AhcEstimate]; 3], _profile: &Profile) {}
     /// Progress and warnings, one line each.
     fn message(&mut self, _sysid: u8, _text: &str) {}
     /// The simulator's truth of the sample about to be estimated (`sim`, `eval`).

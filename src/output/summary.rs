@@ -215,9 +215,26 @@ pub fn render(
             };
             for (f, name) in FILTER_NAMES.iter().enumerate() {
                 let e = est[f][j];
+                // A set filter's bound still at its a priori box says nothing: said instead.
+                let gamma = if e.unexcited[0] {
+                    format!("{:>6.3} {:<16}", e.gamma, "[not excited]")
+                } else {
+                    format!(
+                        "{:>6.3} [{:>6.3}, {:>6.3}]",
+                        e.gamma, e.gamma_lo, e.gamma_hi
+                    )
+                };
+                let delta = if e.unexcited[1] {
+                    format!("{:>+7.3} {:<18}", e.delta, "[not excited]")
+                } else {
+                    format!(
+                        "{:>+7.3} [{:>+7.3}, {:>+7.3}]",
+                        e.delta, e.delta_lo, e.delta_hi
+                    )
+                };
                 let _ = writeln!(
                     s,
-                    "    {:<10} {:>3}  {:<8} {:>6.3} [{:>6.3}, {:>6.3}] {:>+7.3} [{:>+7.3}, {:>+7.3}]  {:>8.1e} {:>8.1e}  {:>9}  {}",
+                    "    {:<10} {:>3}  {:<8} {gamma} {delta}  {:>8.1e} {:>8.1e}  {:>9}  {}",
                     if f == 0 { a.name.as_str() } else { "" },
                     if f == 0 {
                         a.channel.to_string()
@@ -225,12 +242,6 @@ pub fn render(
                         String::new()
                     },
                     name,
-                    e.gamma,
-                    e.gamma_lo,
-                    e.gamma_hi,
-                    e.delta,
-                    e.delta_lo,
-                    e.delta_hi,
                     e.q_gamma,
                     e.q_delta,
                     if f == 0 { n.to_string() } else { String::new() },

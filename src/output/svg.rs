@@ -185,7 +185,8 @@ pub fn render(run: &Run) -> String {
 /// in the length of the log.
 #[derive(Debug, Default)]
 pub struct PlotRecorder {
-    /// (sysid, actuator name, channel) → [MIT-UKF, MIT-ESMF] traces.
+    /// (sysid, actuator name, channel) → [MIT-UKF, set filter] traces: the probable and the
+    /// guaranteed bounds.
     pub traces: Vec<((u8, String, u8), [Trace; 2])>,
     steps: std::collections::BTreeMap<u8, u64>,
     stride: std::collections::BTreeMap<u8, u64>,
@@ -194,6 +195,11 @@ pub struct PlotRecorder {
 }
 
 const PLOT_POINTS: usize = 4000;
+
+/// The filters drawn (`FILTER_NAMES` indices): the MIT-UKF's probable bounds and the set
+/// filter's guaranteed ones. The MIT-ESMF is a detector whose vehicle bounds are its a priori
+/// box; its estimates are in the estimates JSONL.
+const PLOTTED: [usize; 2] = [0, 2];
 
 fn halve(v: &mut Vec<f64>) {
     let mut k = 0;
@@ -208,7 +214,7 @@ impl PlotRecorder {
         &mut self,
         t: f64,
         sysid: u8,
-        est: &[&[crate::estimate::vehicle::AhcEstimate]; 2],
+        est: &[&[crate::estimate::vehicle::AhcEstimate]; 3],
         profile: &crate::telemetry::Profile,
     ) {
         let step = self.steps.entry(sysid).or_insert(0);
@@ -228,7 +234,7 @@ impl PlotRecorder {
                 }
             };
             for (f, tr) in self.traces[idx].1.iter_mut().enumerate() {
-                let e = est[f][j];
+                let e = est[PLOTTED[f]][j];
                 tr.push(
                     t,
                     e.gamma,
@@ -306,7 +312,7 @@ impl PlotRecorder {
             .filter_map(|(_, tr)| tr[0].t.last().copied())
             .fold(f64::NEG_INFINITY, f64::max);
         let span_t = (t1 - t0).max(1e-3);
-        let names = ["MIT-UKF", "MIT-ESMF"];
+        let names = ["MIT-UKF (probable)", "set (guaranteed)"];
         let mut panel = 0;
         for ((sysid, name, channel), traces) in &self.traces {
             for (which, healthy) in [("gamma", 1.0), ("delta", 0.0)] {

@@ -13,6 +13,7 @@ mod commands;
 mod gate;
 mod holes;
 mod running;
+mod set_bounds;
 pub mod step;
 #[cfg(test)]
 mod tests;
@@ -126,7 +127,7 @@ pub struct VehiclePipeline {
     /// Detection warnings already said.
     warned: std::collections::BTreeSet<String>,
     /// Last estimates (vehicle time, per filter and actuator), for summaries and dashboards.
-    pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 2])>,
+    pub last: Option<(f64, [[AhcEstimate; MAX_ACTUATORS]; 3])>,
     /// Vehicle time of the last sample seen (any stage).
     pub last_sample_t: Option<f64>,
     /// A sample on the ground (or disarmed) has been seen: the take-off was watched.

@@ -294,7 +294,7 @@ impl VehiclePipeline {
         sink: &mut dyn Sink,
     ) -> bool {
         let l = calibrated.actuators.len();
-        let filters = match build(calibrated, dt) {
+        let mut filters = match build(calibrated, dt) {
             Ok(f) => f,
             Err(e) => {
                 self.fail(e.to_string(), sink);
@@ -304,6 +304,18 @@ impl VehiclePipeline {
         let m = filters.measurements();
         let exogenous = filters.inputs() > l;
         let delay = calibrated.model.arx.as_ref().map_or(0, |a| a.delay);
+        // The set filter's bounds from this flight's healthy stretch (else the profile's
+        // stated noise).
+        match super::set_bounds::measure(filters.as_ref(), samples, dt, delay, exogenous) {
+            Some((bounds, command_ref)) => {
+                tracing::debug!(sysid = self.sysid, ?bounds, "set filter: residual bounds per lag");
+                filters.set_residual_bounds(bounds, command_ref)
+            }
+            None => sink.message(
+                self.sysid,
+                "the calibration stretch has no unbroken run of a second: the set filter's bounds are the profile's stated noise",
+            ),
+        }
         let mut diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, calibrated, dt);
         // Rule T1: the deviation threshold raised by the gusts this flight's calibration
         // measured (said at the calibration); a profile used as identified has no fit, and none.

@@ -31,8 +31,9 @@ pub struct Core {
     pub diag: Diagnoser,
     sysid: u8,
     l: usize,
-    /// The last step's estimates, per filter and actuator (the first `l` are the vehicle's).
-    pub est: [[AhcEstimate; MAX_ACTUATORS]; 2],
+    /// The last step's estimates, per filter and actuator (the first `l` are the vehicle's):
+    /// the two detectors', then the set filter's (`FILTER_NAMES`).
+    pub est: [[AhcEstimate; MAX_ACTUATORS]; 3],
     /// The last step's decisions.
     pub decisions: Vec<Decision>,
     /// Per filter: when its last reset was reported, and resets since (a filter failing step
@@ -75,15 +76,16 @@ impl Core {
             diag,
             sysid,
             l,
-            est: [[AhcEstimate::default(); MAX_ACTUATORS]; 2],
+            est: [[AhcEstimate::default(); MAX_ACTUATORS]; 3],
             decisions: Vec::with_capacity(8),
             reset_reported: [(f64::NEG_INFINITY, 0); 2],
         }
     }
 
-    /// The last step's estimates of both filters, one per actuator.
-    pub fn estimates(&self) -> [&[AhcEstimate]; 2] {
-        [&self.est[0][..self.l], &self.est[1][..self.l]]
+    /// The last step's estimates of every filter, one per actuator.
+    pub fn estimates(&self) -> [&[AhcEstimate]; 3] {
+        let l = self.l;
+        [&self.est[0][..l], &self.est[1][..l], &self.est[2][..l]]
     }
 
     /// One step (see the module's documentation). Returns, per filter, whether its update
@@ -107,6 +109,9 @@ impl Core {
                 self.est[f][j] = self.filters.ahc(f, j);
             }
         }
+        for j in 0..l {
+            self.est[2][j] = self.filters.guaranteed(j);
+        }
         let views = [&self.est[0][..l], &self.est[1][..l]];
         self.decisions.clear();
         let az = (s.y.len() > 3).then(|| s.y[3]);
@@ -119,7 +124,7 @@ impl Core {
                 self.est[f][j].gain_gap = self.diag.gain_gap(f, j);
             }
         }
-        let views = [&self.est[0][..l], &self.est[1][..l]];
+        let views = [&self.est[0][..l], &self.est[1][..l], &self.est[2][..l]];
         sink.estimates(s.t, self.sysid, &views, &self.profile);
         for d in &self.decisions {
             sink.decision(d);

@@ -217,6 +217,16 @@ impl VehicleFilters for Recorder {
     fn nis(&self, filter: usize) -> f64 {
         self.inner.nis(filter)
     }
+    fn set_residual_bounds(
+        &mut self,
+        bounds: [[f64; 4]; crate::estimate::ahc_set::LAGS.len()],
+        command_ref: [f64; crate::model::MAX_ACTUATORS],
+    ) {
+        self.inner.set_residual_bounds(bounds, command_ref)
+    }
+    fn guaranteed(&self, j: usize) -> AhcEstimate {
+        self.inner.guaranteed(j)
+    }
     fn reset(&mut self, filter: usize) {
         self.inner.reset(filter)
     }

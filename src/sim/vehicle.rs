@@ -103,6 +103,9 @@ pub struct VehicleSimConfig {
     /// Sensor noise standard deviations (gyro rad/s, a_z m/s²).
     pub gyro_noise: f64,
     pub az_noise: f64,
+    /// Gusts' driving noise and sensor noise uniform with the stated standard deviations
+    /// (bounded: `√3 σ`) instead of Gaussian.
+    pub bounded_noise: bool,
     pub seed: u64,
 }
 
@@ -126,6 +129,7 @@ impl VehicleSimConfig {
             faults: vec![],
             gyro_noise: 0.003,
             az_noise: 0.3,
+            bounded_noise: false,
             seed,
         }
     }
@@ -297,6 +301,15 @@ impl VehicleSim {
         u
     }
 
+    /// One draw of unit standard deviation: Gaussian, or uniform on `±√3`.
+    fn noise(&mut self) -> f64 {
+        if self.cfg.bounded_noise {
+            self.rng.uniform(3f64.sqrt())
+        } else {
+            self.rng.normal()
+        }
+    }
+
     pub fn step(&mut self) -> VehicleSample {
         let t = self.time();
         let dt = self.cfg.dt;
@@ -311,13 +324,18 @@ impl VehicleSim {
             eff[j] = g * u[j] + d;
         }
         // Gusts: OU processes, held over the step.
-        if let Some(g) = &self.cfg.gusts {
-            let a = (-dt / g.tau_s.max(dt)).exp();
+        if let Some((angular, vertical, tau_s)) = self
+            .cfg
+            .gusts
+            .as_ref()
+            .map(|g| (g.angular, g.vertical, g.tau_s))
+        {
+            let a = (-dt / tau_s.max(dt)).exp();
             let b = (1.0 - a * a).sqrt();
             for i in 0..3 {
-                self.gust[i] = a * self.gust[i] + b * g.angular[i] * self.rng.normal();
+                self.gust[i] = a * self.gust[i] + b * angular[i] * self.noise();
             }
-            self.gust[3] = a * self.gust[3] + b * g.vertical * self.rng.normal();
+            self.gust[3] = a * self.gust[3] + b * vertical * self.noise();
         }
         let p = &self.truth;
         let mut next = [0.0; 3];
@@ -351,11 +369,11 @@ impl VehicleSim {
         self.k += 1;
         let mut y = [0.0; 4];
         for i in 0..3 {
-            y[i] = next[i] + self.cfg.gyro_noise * self.rng.normal();
+            y[i] = next[i] + self.cfg.gyro_noise * self.noise();
             self.measured_rates[i] = y[i];
         }
         if self.rows == 4 {
-            y[3] = az + self.cfg.az_noise * self.rng.normal();
+            y[3] = az + self.cfg.az_noise * self.noise();
         }
         VehicleSample {
             t: self.time(),
@@ -399,6 +417,7 @@ mod tests {
             faults,
             gyro_noise: 0.003,
             az_noise: 0.3,
+            bounded_noise: false,
             seed: 3,
         }
     }

@@ -294,7 +294,7 @@ impl Alerts {
         &mut self,
         t: f64,
         sysid: u8,
-        est: &[&[AhcEstimate]; 2],
+        est: &[&[AhcEstimate]; 3],
         profile: &Profile,
     ) {
         self.see(sysid);

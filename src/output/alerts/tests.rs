@@ -68,7 +68,7 @@ fn value_names_are_unique_within_a_vehicle() {
     assert_eq!(value_names(&apart)[3], ["g_tail", "d_tail"]);
     let mut a = Alerts::default();
     let est = [AhcEstimate::default(); 4];
-    a.on_estimates(1.0, 1, &[&est, &est], &p);
+    a.on_estimates(1.0, 1, &[&est, &est, &est], &p);
     a.tick(1.0);
     let mut sent = std::collections::BTreeSet::new();
     for frame in &a.outbox {
@@ -83,7 +83,7 @@ fn value_names_are_unique_within_a_vehicle() {
     // values are sent, each under its own name (the old ones went on under new names).
     let hexa = Profile::resolve("hexa-x").unwrap();
     let est6 = [AhcEstimate::default(); 6];
-    a.on_estimates(2.0, 1, &[&est6, &est6], &hexa);
+    a.on_estimates(2.0, 1, &[&est6, &est6, &est6], &hexa);
     a.outbox.clear();
     a.tick(2.0);
     let mut count = std::collections::BTreeMap::new();
@@ -136,19 +136,19 @@ fn a_loss_is_told_again_at_its_new_size() {
     assert_eq!(texts(&a), vec!["AHC swash2 LOE 16% UKF"]);
     est[1].gamma = 0.69;
     // Too soon after the last text: not yet.
-    a.on_estimates(45.0, 1, &[&est, &est], &p);
+    a.on_estimates(45.0, 1, &[&est, &est, &est], &p);
     assert_eq!(texts(&a).len(), 1);
-    a.on_estimates(47.5, 1, &[&est, &est], &p);
+    a.on_estimates(47.5, 1, &[&est, &est, &est], &p);
     assert_eq!(texts(&a)[1], "AHC swash2 LOE 31% UKF");
     // Within 10 points of the new size: nothing more.
     est[1].gamma = 0.62;
-    a.on_estimates(60.0, 1, &[&est, &est], &p);
+    a.on_estimates(60.0, 1, &[&est, &est, &est], &p);
     assert_eq!(texts(&a).len(), 2);
     assert_eq!(a.texts_resized, 1);
     // Cleared: its size is not told again.
     a.on_decision(&decision(Event::Cleared, "swash2", None));
     est[1].gamma = 0.3;
-    a.on_estimates(70.0, 1, &[&est, &est], &p);
+    a.on_estimates(70.0, 1, &[&est, &est, &est], &p);
     assert_eq!(texts(&a).len(), 3, "{:?}", texts(&a));
 }
 
@@ -307,8 +307,8 @@ fn ahc_estimate_carries_the_profile_index_of_each_vehicle() {
     let plane = Profile::resolve("plane").unwrap();
     let est = [AhcEstimate::default(); 8];
     let mut a = Alerts::default();
-    a.on_estimates(1.0, 1, &[&est[..4], &est[..4]], &quad);
-    a.on_estimates(1.0, 2, &[&est[..3], &est[..3]], &plane);
+    a.on_estimates(1.0, 1, &[&est[..4], &est[..4], &est[..4]], &quad);
+    a.on_estimates(1.0, 2, &[&est[..3], &est[..3], &est[..3]], &plane);
     a.tick(1.0);
     let mut seen = Vec::new();
     for frame in &a.outbox {

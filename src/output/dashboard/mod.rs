@@ -129,12 +129,16 @@ impl History {
                 continue;
             }
             let l = profile.actuators.len().min(MAX_ACTUATORS);
-            for (j, (ukf, esmf)) in est[0][..l].iter().zip(&est[1][..l]).enumerate() {
+            let drawn = panels::DRAWN;
+            for (j, (ukf, set)) in (est[drawn[0]][..l].iter())
+                .zip(&est[drawn[1]][..l])
+                .enumerate()
+            {
                 let s = self.series.entry((*sysid, j)).or_default();
                 if s.back().is_some_and(|(last, _)| *last >= *t) {
                     continue;
                 }
-                s.push_back((*t, [*ukf, *esmf]));
+                s.push_back((*t, [*ukf, *set]));
                 while s.front().is_some_and(|(t0, _)| t - t0 > self.window_s) {
                     s.pop_front();
                 }

@@ -36,6 +36,10 @@ pub(super) fn class_style(c: Option<FaultClass>) -> (String, Style) {
 
 /// A bar of `width` cells over [lo_axis, hi_axis]: the bound as `─`, the healthy value as
 /// `│`, the estimate as `●`.
+/// The filters the dashboard shows (`FILTER_NAMES` indices): the MIT-UKF's probable bounds and
+/// the set filter's guaranteed ones.
+pub(super) const DRAWN: [usize; 2] = [0, 2];
+
 pub(super) fn bound_bar(
     e: f64,
     lo: f64,
@@ -152,8 +156,8 @@ pub(super) fn actuator_table(
         "ch".into(),
         format!("{:<w$}", "UKF gamma", w = bar + 6),
         format!("{:<w$}", "UKF delta", w = bar),
-        format!("{:<w$}", "ESMF gamma", w = bar + 6),
-        format!("{:<w$}", "ESMF delta", w = bar),
+        format!("{:<w$}", "set gamma", w = bar + 6),
+        format!("{:<w$}", "set delta", w = bar),
         "state".into(),
     ])
     .style(Style::default().add_modifier(Modifier::BOLD));
@@ -176,18 +180,23 @@ pub(super) fn actuator_table(
             state = "excitation low".into();
             style = Style::default().fg(Color::Yellow);
         }
+        // A set filter's bound that is still the a priori box says nothing: said instead of
+        // drawn.
         let cells = |e: &AhcEstimate| {
-            (
-                format!(
-                    "{:5.2} {}",
-                    e.gamma,
-                    bound_bar(e.gamma, e.gamma_lo, e.gamma_hi, 1.0, (0.0, 2.0), bar)
-                ),
-                bound_bar(e.delta, e.delta_lo, e.delta_hi, 0.0, (-1.0, 1.0), bar),
-            )
+            let gamma = if e.unexcited[0] {
+                format!("{:<bar$}", "not excited")
+            } else {
+                bound_bar(e.gamma, e.gamma_lo, e.gamma_hi, 1.0, (0.0, 2.0), bar)
+            };
+            let delta = if e.unexcited[1] {
+                format!("{:<bar$}", "not excited")
+            } else {
+                bound_bar(e.delta, e.delta_lo, e.delta_hi, 0.0, (-1.0, 1.0), bar)
+            };
+            (format!("{:5.2} {gamma}", e.gamma), delta)
         };
         let (ug, ud) = cells(&est[0][j]);
-        let (eg, ed) = cells(&est[1][j]);
+        let (eg, ed) = cells(&est[2][j]);
         let mut row = Row::new(vec![
             a.name.clone(),
             a.channel.to_string(),
@@ -287,7 +296,7 @@ pub(super) fn chart(
         for fi in 0..2 {
             sets.push(
                 Dataset::default()
-                    .name(FILTER_NAMES[fi])
+                    .name(FILTER_NAMES[DRAWN[fi]])
                     .marker(Marker::Braille)
                     .graph_type(GraphType::Line)
                     .style(Style::default().fg(colours[fi]))

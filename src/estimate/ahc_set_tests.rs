@@ -1,0 +1,198 @@
+//! The set-membership AHC estimator against the simulator's truth, with bounded noise and the
+//! residual bound derived from the noise's stated bounds (not fitted to the flight).
+
+#![allow(clippy::needless_range_loop)]
+
+use super::*;
+use crate::sim::fault::Fault;
+use crate::sim::vehicle::{AttitudeDither, Gusts, Manoeuvre, VehicleSim, VehicleSimConfig};
+use crate::telemetry::Profile;
+
+const DT: f64 = 0.02;
+
+/// A manoeuvring flight with white bounded gusts and bounded sensor noise (uniform, std as
+/// stated), the monitor's model exact.
+fn flight(profile: &str, faults: &[&str], seed: u64) -> VehicleSimConfig {
+    let profile = Profile::resolve(profile).unwrap();
+    let mut cfg = VehicleSimConfig::calm(profile, DT, seed);
+    cfg.bounded_noise = true;
+    cfg.gusts = Some(Gusts {
+        angular: [0.5, 0.5, 0.15],
+        vertical: 0.3,
+        tau_s: DT,
+    });
+    cfg.dither = Some(AttitudeDither {
+        amplitude: [0.05, 0.05, 0.1],
+        freqs_hz: vec![0.3, 0.7, 1.1],
+    });
+    cfg.manoeuvres = (0..6)
+        .map(|k| Manoeuvre {
+            t: 5.0 + 10.0 * k as f64,
+            duration_s: 3.0,
+            roll_deg: [15.0, -10.0, 0.0][k % 3],
+            pitch_deg: [0.0, 10.0, -12.0][k % 3],
+            yaw_rate_dps: [0.0, 20.0, -25.0][k % 3],
+        })
+        .collect();
+    cfg.faults = faults
+        .iter()
+        .map(|f| toml::from_str(f).unwrap())
+        .collect::<Vec<Fault>>();
+    cfg
+}
+
+/// The bound of one step's healthy residual for `cfg`'s noise, exact model: the white gust
+/// (OU with `a = e^{-1}` at `tau = dt`, driving noise within `√3 σ`: `|g| ≤ b √3 σ / (1 - a)`)
+/// held over the step, and the gyro's noise on this and the previous sample.
+fn residual_bound(cfg: &VehicleSimConfig) -> [f64; 4] {
+    let g = cfg.gusts.as_ref().unwrap();
+    let a = (-1.0f64).exp();
+    let b = (1.0 - a * a).sqrt();
+    let gust = |s: f64| b * 3f64.sqrt() * s / (1.0 - a);
+    let p = cfg.profile.rate_params();
+    let mut out = [0.0; 4];
+    for i in 0..3 {
+        let d = p.damping[i];
+        let hold = -(-d * DT).exp_m1() / d;
+        out[i] = hold * gust(g.angular[i]) + 3f64.sqrt() * cfg.gyro_noise * (1.0 + (-d * DT).exp());
+    }
+    out[3] = gust(g.vertical) + 3f64.sqrt() * cfg.az_noise;
+    out
+}
+
+struct Run {
+    /// Steps with every actuator's true gamma and delta inside the bounds, and all steps.
+    inside: usize,
+    steps: usize,
+    contradictions: u64,
+    /// Per actuator, the widest gamma and delta half-width after 20 s of flight.
+    half_widths: Vec<(f64, f64)>,
+    /// First time the faulted actuator's gamma bounds exclude 1.
+    excluded_at: Option<f64>,
+}
+
+fn run<const N: usize, const M: usize>(
+    cfg: VehicleSimConfig,
+    duration_s: f64,
+    faulted: Option<usize>,
+) -> Run {
+    run_with::<N, M>(
+        cfg,
+        duration_s,
+        faulted,
+        crate::estimate::vehicle::SET_DRIFT_PER_S,
+    )
+}
+
+fn run_with<const N: usize, const M: usize>(
+    cfg: VehicleSimConfig,
+    duration_s: f64,
+    faulted: Option<usize>,
+    drift_per_s: f64,
+) -> Run {
+    let bound = residual_bound(&cfg);
+    let model = RateModel::<N, M>::new(&cfg.profile.rate_params(), DT).unwrap();
+    let l = model.actuators();
+    let mut residual_bound = [bound.map(|b| 2.0 * b); LAGS.len()];
+    residual_bound[0] = bound;
+    let params = AhcSetParams {
+        residual_bound,
+        drift_gamma: drift_per_s * DT,
+        drift_delta: drift_per_s * DT,
+        model_error: 0.0,
+        command_ref: [0.0; crate::model::MAX_ACTUATORS],
+    };
+    let lo = vec![[-1.0, -1.0]; l];
+    let hi = vec![[3.0, 1.0]; l];
+    let mut set = AhcSet::<N, M>::new(model, params, &lo, &hi);
+    let mut sim = VehicleSim::new(cfg).unwrap();
+    let mut out = Run {
+        inside: 0,
+        steps: 0,
+        contradictions: 0,
+        half_widths: vec![(0.0, 0.0); l],
+        excluded_at: None,
+    };
+    for _ in 0..(duration_s / DT) as usize {
+        let s = sim.step();
+        set.try_step(&s.u[..l], &SVector::<f64, M>::from_column_slice(&s.y[..M]))
+            .unwrap();
+        let inside = (0..l).all(|j| {
+            let (gl, gh) = set.bounds(j, 0);
+            let (dl, dh) = set.bounds(j, 1);
+            gl <= s.gamma[j] && s.gamma[j] <= gh && dl <= s.delta[j] && s.delta[j] <= dh
+        });
+        out.steps += 1;
+        out.inside += inside as usize;
+        if s.t >= 20.0 {
+            for j in 0..l {
+                let (gl, gh) = set.bounds(j, 0);
+                let (dl, dh) = set.bounds(j, 1);
+                let w = &mut out.half_widths[j];
+                *w = (w.0.max(0.5 * (gh - gl)), w.1.max(0.5 * (dh - dl)));
+            }
+        }
+        if let Some(j) = faulted
+            && out.excluded_at.is_none()
+            && s.gamma[j] < 1.0
+            && set.bounds(j, 0).1 < 1.0
+        {
+            out.excluded_at = Some(s.t);
+        }
+    }
+    out.contradictions = set.contradictions;
+    out
+}
+
+/// Healthy manoeuvring flights of a plane (three surfaces, three rate rows) and a quad X (four
+/// motors, rates and a_z): the truth is inside every step's bounds and no sample contradicts
+/// the sets; the plane's surfaces are bounded well inside their a priori box (gamma ±2, delta
+/// ±1): measured 0.2-0.5 and 0.03-0.06 at worst after 20 s.
+#[test]
+fn healthy_flights_stay_inside_their_bounds() {
+    let plane = run::<9, 3>(flight("plane", &[], 1), 60.0, None);
+    assert_eq!((plane.inside, plane.contradictions), (plane.steps, 0));
+    for (j, (g, d)) in plane.half_widths.iter().enumerate() {
+        assert!(
+            *g < 1.0 && *d < 0.25,
+            "plane surface {j}: half-widths {g:.3}, {d:.3}"
+        );
+    }
+    let quad = run::<11, 4>(flight("quad-x", &[], 1), 60.0, None);
+    assert_eq!((quad.inside, quad.contradictions), (quad.steps, 0));
+}
+
+/// A loss to 0.6 of the plane's elevator at 30 s, between manoeuvres (the next at 35 s): its
+/// gamma bounds exclude the healthy gain once the elevator moves, within 2 s of the manoeuvre's
+/// start (measured 34.7 s; at trim a loss changes the output too little against these bounds,
+/// the noise's worst case).
+#[test]
+fn a_surface_loss_excludes_the_healthy_gain_once_excited() {
+    let fault = "actuator='elevator'\nt=30.0\ngamma=0.6";
+    let r = run::<9, 3>(flight("plane", &[fault], 2), 60.0, Some(1));
+    let at = r.excluded_at.expect("the healthy gain was never excluded");
+    assert!((30.0..=37.0).contains(&at), "excluded at {at:.2} s");
+}
+
+/// More actuators than measured rows (a hexacopter's six motors, four rows): no sample bounds
+/// one motor's output, the sets say so (`separates_outputs` false) and stay the a priori box,
+/// which the truth is inside.
+#[test]
+fn more_actuators_than_rows_are_not_separated() {
+    let cfg = flight("hexa-x", &[], 3);
+    let model = RateModel::<15, 4>::new(&cfg.profile.rate_params(), DT).unwrap();
+    let bound = residual_bound(&cfg);
+    let mut residual_bound = [bound.map(|b| 2.0 * b); LAGS.len()];
+    residual_bound[0] = bound;
+    let params = AhcSetParams {
+        residual_bound,
+        drift_gamma: 0.0,
+        drift_delta: 0.0,
+        model_error: 0.0,
+        command_ref: [0.0; crate::model::MAX_ACTUATORS],
+    };
+    let set = AhcSet::<15, 4>::new(model, params, &[[-1.0, -1.0]; 6], &[[3.0, 1.0]; 6]);
+    assert!(!set.separates_outputs());
+    let r = run::<15, 4>(cfg, 20.0, None);
+    assert_eq!(r.inside, r.steps);
+}
