@@ -216,22 +216,28 @@ pub fn render(
             for (f, name) in FILTER_NAMES.iter().enumerate() {
                 let e = est[f][j];
                 // A set filter's bound still at its a priori box says nothing: said instead.
-                let gamma = if e.unexcited[0] {
-                    format!("{:>6.3} {:<16}", e.gamma, "[not excited]")
-                } else {
-                    format!(
-                        "{:>6.3} [{:>6.3}, {:>6.3}]",
-                        e.gamma, e.gamma_lo, e.gamma_hi
-                    )
+                let num = |v: f64, w: usize, signed: bool| {
+                    if signed {
+                        format!("{v:>+w$.3}")
+                    } else {
+                        format!("{v:>w$.3}")
+                    }
                 };
-                let delta = if e.unexcited[1] {
-                    format!("{:>+7.3} {:<18}", e.delta, "[not excited]")
-                } else {
-                    format!(
-                        "{:>+7.3} [{:>+7.3}, {:>+7.3}]",
-                        e.delta, e.delta_lo, e.delta_hi
-                    )
+                let cell = |unexcited: bool, [v, lo, hi]: [f64; 3], w: usize, signed: bool| {
+                    if unexcited {
+                        format!(
+                            "{} {:<n$}",
+                            num(v, w, signed),
+                            "[not excited]",
+                            n = 2 * w + 4
+                        )
+                    } else {
+                        let [v, lo, hi] = [v, lo, hi].map(|x| num(x, w, signed));
+                        format!("{v} [{lo}, {hi}]")
+                    }
                 };
+                let gamma = cell(e.unexcited[0], [e.gamma, e.gamma_lo, e.gamma_hi], 6, false);
+                let delta = cell(e.unexcited[1], [e.delta, e.delta_lo, e.delta_hi], 7, true);
                 let _ = writeln!(
                     s,
                     "    {:<10} {:>3}  {:<8} {gamma} {delta}  {:>8.1e} {:>8.1e}  {:>9}  {}",
