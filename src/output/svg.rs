@@ -58,14 +58,24 @@ fn polyline(
     map: &dyn Fn(f64, f64) -> (f64, f64),
     style: &str,
 ) {
-    let mut pts = String::new();
+    // A non-finite value (a set filter's bound still at its a priori box) breaks the line.
+    let mut segments = vec![String::new()];
     for (x, y) in t.iter().zip(v) {
         if y.is_finite() {
             let (px, py) = map(*x, *y);
-            let _ = write!(pts, "{px:.1},{py:.1} ");
+            if let Some(last) = segments.last_mut() {
+                let _ = write!(last, "{px:.1},{py:.1} ");
+            }
+        } else if segments.last().is_some_and(|s| !s.is_empty()) {
+            segments.push(String::new());
         }
     }
-    let _ = writeln!(out, r#"<polyline fill="none" {style} points="{pts}"/>"#);
+    if segments.len() > 1 && segments.last().is_some_and(|s| s.is_empty()) {
+        segments.pop();
+    }
+    for pts in segments {
+        let _ = writeln!(out, r#"<polyline fill="none" {style} points="{pts}"/>"#);
+    }
 }
 
 pub fn render(run: &Run) -> String {
@@ -235,12 +245,20 @@ impl PlotRecorder {
             };
             for (f, tr) in self.traces[idx].1.iter_mut().enumerate() {
                 let e = est[PLOTTED[f]][j];
+                // Bounds still at the a priori box are not drawn (the legend says so).
+                let bounds = |unexcited: bool, lo: f64, hi: f64| {
+                    if unexcited {
+                        (f64::NAN, f64::NAN)
+                    } else {
+                        (lo, hi)
+                    }
+                };
                 tr.push(
                     t,
                     e.gamma,
-                    (e.gamma_lo, e.gamma_hi),
+                    bounds(e.unexcited[0], e.gamma_lo, e.gamma_hi),
                     e.delta,
-                    (e.delta_lo, e.delta_hi),
+                    bounds(e.unexcited[1], e.delta_lo, e.delta_hi),
                 );
                 full |= tr.t.len() >= PLOT_POINTS;
             }
@@ -415,6 +433,11 @@ impl PlotRecorder {
                     out,
                     r##"<text x="{lx}" y="{}" fill="#666">dashed: bounds</text>"##,
                     y0 + 52.0
+                );
+                let _ = writeln!(
+                    out,
+                    r##"<text x="{lx}" y="{}" fill="#666" font-size="10">gaps: not excited</text>"##,
+                    y0 + 66.0
                 );
             }
         }

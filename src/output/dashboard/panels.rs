@@ -269,8 +269,11 @@ pub(super) fn chart(
                 for fi in 0..2 {
                     let (v, lo, hi) = pick(&est[fi]);
                     lines[3 * fi].push((*t, v));
-                    lines[3 * fi + 1].push((*t, lo));
-                    lines[3 * fi + 2].push((*t, hi));
+                    // A set filter's bound still at the a priori box is not drawn.
+                    if !est[fi].unexcited[k] {
+                        lines[3 * fi + 1].push((*t, lo));
+                        lines[3 * fi + 2].push((*t, hi));
+                    }
                 }
             }
         }
