@@ -196,3 +196,55 @@ fn more_actuators_than_rows_are_not_separated() {
     let r = run::<15, 4>(cfg, 20.0, None);
     assert_eq!(r.inside, r.steps);
 }
+
+/// A quad's motor 2 losing 70 % at 30 s: its set, narrowed on the healthy motor, contradicts
+/// the data (no other motor's does, and none before the onset), starts again from the box
+/// and the data, its bounds widened by `CONTRADICTION_GROWTH`; after it the truth is inside.
+#[test]
+fn a_step_fault_contradicts_its_actuator_s_set_which_restarts_wider() {
+    let cfg = flight("quad-x", &["actuator='motor2'\nt=30.0\ngamma=0.3"], 4);
+    let bound = residual_bound(&cfg);
+    let mut residual_bound = [bound.map(|b| 2.0 * b); LAGS.len()];
+    residual_bound[0] = bound;
+    let model = RateModel::<11, 4>::new(&cfg.profile.rate_params(), DT).unwrap();
+    let params = AhcSetParams {
+        residual_bound,
+        drift_gamma: 0.05 * DT,
+        drift_delta: 0.05 * DT,
+        model_error: 0.0,
+        command_ref: [0.0; crate::model::MAX_ACTUATORS],
+    };
+    let mut set = AhcSet::<11, 4>::new(model, params, &[[-1.0, -1.0]; 4], &[[3.0, 1.0]; 4]);
+    let before = set.output_bound[1];
+    let mut sim = VehicleSim::new(cfg).unwrap();
+    let mut first = None;
+    for _ in 0..(40.0 / DT) as usize {
+        let s = sim.step();
+        set.try_step(&s.u[..4], &SVector::<f64, 4>::from_column_slice(&s.y[..4]))
+            .unwrap();
+        for j in 0..4 {
+            if set.contradicted[j] {
+                assert!(
+                    j == 1 && s.t >= 30.0,
+                    "motor {} contradicted at {:.2} s",
+                    j + 1,
+                    s.t
+                );
+                first.get_or_insert(s.t);
+            }
+        }
+        if first.is_some_and(|t| s.t >= t + 0.5) {
+            let (gl, gh) = set.bounds(1, 0);
+            assert!(
+                gl <= 0.3 && 0.3 <= gh,
+                "t {:.2}: gamma [{gl:.3}, {gh:.3}]",
+                s.t
+            );
+        }
+    }
+    let t = first.expect("no contradiction");
+    assert!(t < 31.0, "first contradiction at {t:.2} s");
+    // Wider by the growth (at least once), and wider at all.
+    let after = set.output_bound[1][0];
+    assert!(after >= CONTRADICTION_GROWTH * before[0] - 1e-12 && after > before[0]);
+}

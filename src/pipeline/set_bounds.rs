@@ -95,3 +95,80 @@ pub fn measure(
     }
     Some((bounds, mean))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::vehicle::build;
+    use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
+    use crate::telemetry::Profile;
+
+    fn stretch(n: usize) -> (Box<dyn VehicleFilters>, Vec<StoredSample>) {
+        let profile = Profile::resolve("quad-x").unwrap();
+        let mut sim = VehicleSim::new(VehicleSimConfig::calm(profile.clone(), 0.02, 5)).unwrap();
+        let samples = (0..n)
+            .map(|_| {
+                let s = sim.step();
+                let mut u = [0.0; MAX_ACTUATORS];
+                u[..4].copy_from_slice(&s.u[..4]);
+                StoredSample {
+                    t: s.t,
+                    rates: [s.y[0], s.y[1], s.y[2]],
+                    u,
+                    az: Some(s.y[3]),
+                }
+            })
+            .collect();
+        (build(&profile, 0.02).unwrap(), samples)
+    }
+
+    /// The bounds are the margin times the largest residual (recomputed here by brute force)
+    /// and its largest change over each lag, the latter capped at twice the level; the mean
+    /// commands are the stretch's.
+    #[test]
+    fn bounds_are_the_stretch_s_largest_residuals_with_the_margin() {
+        let (filters, samples) = stretch(600);
+        let (bounds, mean) = measure(filters.as_ref(), &samples, 0.02, 0, false).unwrap();
+        let e: Vec<[f64; 4]> = (1..samples.len())
+            .map(|k| {
+                let s = &samples[k];
+                let y = [s.rates[0], s.rates[1], s.rates[2], s.az.unwrap()];
+                filters.healthy_residual(&samples[k - 1].rates, &samples[k - 1].u[..4], &y)
+            })
+            .collect();
+        for (b, &lag) in bounds.iter().zip(&LAGS) {
+            for i in 0..4 {
+                let largest = (lag..e.len())
+                    .map(|k| {
+                        if lag == 0 {
+                            e[k][i]
+                        } else {
+                            e[k][i] - e[k - lag][i]
+                        }
+                        .abs()
+                    })
+                    .fold(0.0, f64::max);
+                let want = (SET_BOUND_MARGIN * largest).min(2.0 * bounds[0][i]);
+                assert!(
+                    (b[i] - want).abs() < 1e-12,
+                    "lag {lag} row {i}: {} vs {want}",
+                    b[i]
+                );
+                assert!(b[i] > 0.0);
+            }
+        }
+        let u0: f64 = samples.iter().map(|s| s.u[0]).sum::<f64>() / samples.len() as f64;
+        assert!((mean[0] - u0).abs() < 1e-12);
+    }
+
+    /// A stretch without an unbroken run longer than the longest lag gives no bounds (the
+    /// profile's stated ones stand): every 20th sample is late by two periods.
+    #[test]
+    fn a_stretch_broken_too_often_gives_none() {
+        let (filters, mut samples) = stretch(600);
+        for (k, s) in samples.iter_mut().enumerate() {
+            s.t += 0.04 * (k / 20) as f64;
+        }
+        assert!(measure(filters.as_ref(), &samples, 0.02, 0, false).is_none());
+    }
+}
