@@ -295,6 +295,15 @@ fn demo_alerts_reach_a_pymavlink_listener() {
     let names = seen["named_value_float"].as_array().unwrap();
     assert!(names.iter().any(|n| n == "g_swash2"), "{names:?}");
     assert!(names.iter().any(|n| n == "d_tail"), "{names:?}");
+    // AHC_ESTIMATE, decoded by pymavlink's code generated from dialects/ahcmon.xml: every
+    // actuator, each guaranteed bound either a finite interval about its estimate or NaN
+    // with its not-excited bit.
+    assert!(seen["ahc_estimate"].as_u64().unwrap() >= 4, "{seen}");
+    let estimated = seen["ahc_estimate_names"].as_array().unwrap();
+    for name in ["swash1", "swash2", "swash3", "tail"] {
+        assert!(estimated.iter().any(|n| n == name), "{estimated:?}");
+    }
+    assert_eq!(seen["ahc_estimate_bad"], serde_json::json!([]), "{seen}");
 }
 
 /// MAVProxy (tests/reference/requirements-nodeps.txt) listening on `masters` and sending to `out` (all on

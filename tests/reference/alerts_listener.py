@@ -1,21 +1,78 @@
 """A planner-side listener (pymavlink, udpin) for ahcmon's alerts: prints one JSON object with
-what arrived from component 191: heartbeats (type, autopilot), STATUSTEXT texts and the
-NAMED_VALUE_FLOAT names. Exits when it has seen a fault STATUSTEXT and values, or at timeout."""
+what arrived from component 191: heartbeats (type, autopilot), STATUSTEXT texts, the
+NAMED_VALUE_FLOAT names and the AHC_ESTIMATE messages, decoded with pymavlink's own code
+generator (mavgen) run on dialects/ahcmon.xml, as a user of the dialect would. Exits when it has
+seen a fault STATUSTEXT, values and estimates of four actuators, or at timeout."""
+import contextlib
+import importlib.util
 import json
+import math
+import os
+import socket
 import sys
+import tempfile
 import time
 
-from pymavlink import mavutil
+from pymavlink.generator import mavgen
 
 port, timeout = int(sys.argv[1]), float(sys.argv[2])
-conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
+xml = os.path.join(os.path.dirname(__file__), "..", "..", "dialects", "ahcmon.xml")
+with tempfile.TemporaryDirectory() as tmp:
+    out = os.path.join(tmp, "ahcmon_dialect.py")
+    opts = mavgen.Opts(out, wire_protocol="2.0", language="Python3", validate=False)
+    with contextlib.redirect_stdout(sys.stderr):  # mavgen reports progress on stdout
+        generated = mavgen.mavgen(opts, [xml])
+    if not generated:
+        sys.exit("mavgen failed on dialects/ahcmon.xml")
+    spec = importlib.util.spec_from_file_location("ahcmon_dialect", out)
+    dialect = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(dialect)
+
+# A plain socket and the generated parser: mavutil would swap its parser for ardupilotmega's on
+# the first MAVLink 2 frame.
+sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+sock.bind(("127.0.0.1", port))
+sock.settimeout(0.5)
+parser = dialect.MAVLink(None)
+parser.robust_parsing = True
+
+
+def receive():
+    """The messages of one datagram (none at a timeout)."""
+    try:
+        data, _ = sock.recvfrom(65535)
+    except socket.timeout:
+        return []
+    return parser.parse_buffer(data) or []
+
+
 print("ready", flush=True)
-seen = {"heartbeat": [], "statustext": [], "named_value_float": [], "ahc_estimate": 0, "sysids": []}
-end = time.time() + timeout
-while time.time() < end:
-    m = conn.recv_match(blocking=True, timeout=0.5)
-    if m is None or m.get_srcComponent() != 191:
-        continue
+seen = {"heartbeat": [], "statustext": [], "named_value_float": [], "ahc_estimate": 0, "sysids": [],
+        "ahc_estimate_names": [], "ahc_estimate_bad": [], "set_unexcited": [], "bad_data": 0}
+
+
+def check_estimate(m):
+    """The probable bounds finite around their estimate; each guaranteed coefficient either NaN
+    with its not-excited bit or finite with lo <= estimate <= hi."""
+    bad = []
+    if not (m.ukf_gamma_lo <= m.ukf_gamma <= m.ukf_gamma_hi):
+        bad.append("ukf gamma")
+    for bit, (est, lo, hi) in enumerate([(m.set_gamma, m.set_gamma_lo, m.set_gamma_hi),
+                                         (m.set_delta, m.set_delta_lo, m.set_delta_hi)]):
+        if m.set_unexcited & (1 << bit):
+            if not all(math.isnan(v) for v in (est, lo, hi)):
+                bad.append(f"set {bit}: numbers with the not-excited bit")
+        elif not (lo <= est <= hi):
+            bad.append(f"set {bit}: {lo} {est} {hi}")
+    return bad
+
+
+def handle(m):
+    if m.get_type() == "BAD_DATA":
+        seen["bad_data"] += 1
+        return
+    if m.get_srcComponent() != 191:
+        return
     if m.get_srcSystem() not in seen["sysids"]:
         seen["sysids"].append(m.get_srcSystem())
     t = m.get_type()
@@ -26,8 +83,21 @@ while time.time() < end:
     elif t == "NAMED_VALUE_FLOAT":
         if m.name not in seen["named_value_float"]:
             seen["named_value_float"].append(m.name)
-    elif t == "UNKNOWN_42900" or m.get_msgId() == 42900:
+    elif t == "AHC_ESTIMATE":
         seen["ahc_estimate"] += 1
-    if any("swash2" in s[1] for s in seen["statustext"]) and seen["named_value_float"]:
+        name = m.name.rstrip("\0") if isinstance(m.name, str) else m.name.decode().rstrip("\0")
+        if name not in seen["ahc_estimate_names"]:
+            seen["ahc_estimate_names"].append(name)
+        if m.set_unexcited not in seen["set_unexcited"]:
+            seen["set_unexcited"].append(m.set_unexcited)
+        seen["ahc_estimate_bad"] += [f"{name}: {b}" for b in check_estimate(m)]
+
+
+end = time.time() + timeout
+while time.time() < end:
+    for m in receive():
+        handle(m)
+    if (any("swash2" in s[1] for s in seen["statustext"]) and seen["named_value_float"]
+            and len(seen["ahc_estimate_names"]) >= 4):
         break
 print(json.dumps(seen), flush=True)

@@ -2,7 +2,7 @@
 //! (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) sent as the vehicle's system id with
 //! component id 191, a STATUSTEXT per decision (severity by class, at most 50 characters,
 //! rate-limited), NAMED_VALUE_FLOAT `g_<name>` / `d_<name>` per actuator at 2 Hz, and our
-//! AHC_ESTIMATE with both filters' bounds. Pure: encoded frames go to `outbox`; the caller
+//! AHC_ESTIMATE with the probable (MIT-UKF) and guaranteed (set filter) bounds. Pure: encoded frames go to `outbox`; the caller
 //! sends them. It never commands the vehicle.
 
 use crate::diagnose::vehicle::{Decision, Event, FaultClass};
@@ -40,7 +40,8 @@ const LOSS_RESAY_S: f64 = 5.0;
 struct Latest {
     t: f64,
     ukf: AhcEstimate,
-    esmf: AhcEstimate,
+    /// The set filter's guaranteed estimate.
+    set: AhcEstimate,
     channel: u8,
     /// The actuator's index in its vehicle's profile (AHC_ESTIMATE.actuator).
     index: u8,
@@ -352,7 +353,7 @@ impl Alerts {
                 Latest {
                     t,
                     ukf: est[0][j],
-                    esmf: est[1][j],
+                    set: est[2][j],
                     channel: a.channel,
                     index: j as u8,
                 },
@@ -433,6 +434,7 @@ impl Alerts {
                     .get(&(sysid, name.clone()))
                     .copied()
                     .unwrap_or(AhcState::AHC_STATE_HEALTHY);
+                let [g, d] = guaranteed(&l.set);
                 let msg = MavMessage::AHC_ESTIMATE(AHC_ESTIMATE_DATA {
                     time_boot_ms,
                     actuator: l.index,
@@ -445,17 +447,29 @@ impl Alerts {
                     ukf_delta: l.ukf.delta as f32,
                     ukf_delta_lo: l.ukf.delta_lo as f32,
                     ukf_delta_hi: l.ukf.delta_hi as f32,
-                    esmf_gamma: l.esmf.gamma as f32,
-                    esmf_gamma_lo: l.esmf.gamma_lo as f32,
-                    esmf_gamma_hi: l.esmf.gamma_hi as f32,
-                    esmf_delta: l.esmf.delta as f32,
-                    esmf_delta_lo: l.esmf.delta_lo as f32,
-                    esmf_delta_hi: l.esmf.delta_hi as f32,
+                    set_gamma: g[0],
+                    set_gamma_lo: g[1],
+                    set_gamma_hi: g[2],
+                    set_delta: d[0],
+                    set_delta_lo: d[1],
+                    set_delta_hi: d[2],
+                    set_unexcited: u8::from(l.set.unexcited[0]) | u8::from(l.set.unexcited[1]) << 1,
                 });
                 self.push(sysid, &msg);
             }
         }
     }
+}
+
+/// The set filter's `[estimate, lo, hi]` of gamma and of delta as sent: NaN for a coefficient
+/// still at its a priori box, which says nothing (a planner draws no line for NaN).
+fn guaranteed(set: &AhcEstimate) -> [[f32; 3]; 2] {
+    let sent =
+        |unexcited: bool, v: [f64; 3]| v.map(|x| if unexcited { f32::NAN } else { x as f32 });
+    [
+        sent(set.unexcited[0], [set.gamma, set.gamma_lo, set.gamma_hi]),
+        sent(set.unexcited[1], [set.delta, set.delta_lo, set.delta_hi]),
+    ]
 }
 
 #[cfg(test)]

@@ -331,6 +331,70 @@ fn ahc_estimate_carries_the_profile_index_of_each_vehicle() {
 }
 
 #[test]
+fn ahc_estimate_sends_the_probable_and_the_guaranteed_bounds_and_nan_where_not_excited() {
+    use crate::protocol::frame::{Parsed, parse};
+    let quad = Profile::resolve("quad-x").unwrap();
+    let mut ukf = [AhcEstimate::default(); 4];
+    let mut esmf = [AhcEstimate::default(); 4];
+    let mut set = [AhcEstimate::default(); 4];
+    for j in 0..4 {
+        let x = j as f64;
+        ukf[j] = AhcEstimate {
+            gamma: 0.9 - 0.01 * x,
+            gamma_lo: 0.8,
+            gamma_hi: 1.0,
+            delta: 0.01,
+            delta_lo: -0.02,
+            delta_hi: 0.04,
+            ..AhcEstimate::default()
+        };
+        // Not sent: the MIT-ESMF is a detector, not the guaranteed bound.
+        esmf[j].gamma = 7.0;
+        set[j] = AhcEstimate {
+            gamma: 0.7 + 0.01 * x,
+            gamma_lo: 0.5,
+            gamma_hi: 0.95,
+            delta: -0.03,
+            delta_lo: -0.1,
+            delta_hi: 0.05,
+            unexcited: [j == 1, j == 2],
+            ..AhcEstimate::default()
+        };
+    }
+    let mut a = Alerts::default();
+    a.on_estimates(2.0, 1, &[&ukf, &esmf, &set], &quad);
+    a.tick(2.0);
+    let mut sent = Vec::new();
+    for frame in &a.outbox {
+        if let Parsed::Frame(f, _) = parse(frame)
+            && let MavMessage::AHC_ESTIMATE(m) = f.msg
+        {
+            sent.push(m);
+        }
+    }
+    sent.sort_by_key(|m| m.actuator);
+    assert_eq!(sent.len(), 4);
+    for (j, m) in sent.iter().enumerate() {
+        let x = j as f32;
+        assert_eq!(m.ukf_gamma, 0.9 - 0.01 * x);
+        assert_eq!([m.ukf_gamma_lo, m.ukf_gamma_hi], [0.8, 1.0]);
+        assert_eq!(m.set_unexcited, u8::from(j == 1) | u8::from(j == 2) << 1);
+        let gamma = [m.set_gamma, m.set_gamma_lo, m.set_gamma_hi];
+        let delta = [m.set_delta, m.set_delta_lo, m.set_delta_hi];
+        if j == 1 {
+            assert!(gamma.iter().all(|v| v.is_nan()), "{m:?}");
+        } else {
+            assert_eq!(gamma, [(0.7 + 0.01 * j as f64) as f32, 0.5, 0.95]);
+        }
+        if j == 2 {
+            assert!(delta.iter().all(|v| v.is_nan()), "{m:?}");
+        } else {
+            assert_eq!(delta, [-0.03, -0.1, 0.05]);
+        }
+    }
+}
+
+#[test]
 fn texts_are_rate_limited_and_queued() {
     let mut a = Alerts::default();
     a.tick(0.0);
