@@ -31,7 +31,10 @@ fn main() -> ExitCode {
                 }
                 msg.push_str(&link);
             }
-            eprintln!("ahcmon: error: {}", msg.replace('\n', " "));
+            eprintln!(
+                "ahcmon: error: {}",
+                ahcmon::output::printable(&msg.replace('\n', " "))
+            );
             ExitCode::from(if app::is_input_error(&e) { 2 } else { 1 })
         }
     }

@@ -567,6 +567,120 @@ fn an_output_never_overwrites_the_input_or_another_output() {
     }
 }
 
+/// Yesterday's outputs survive a run that stops on its input: an empty file, random bytes
+/// (which make a frame of an unknown id, whose checksum cannot be checked), a directory, a
+/// missing file. Each is an input error (exit 2); an output file the run created is removed,
+/// an existing one keeps its bytes. A run that completes replaces them, emptied when it made
+/// no line.
+#[test]
+fn a_run_that_stops_on_its_input_loses_no_output() {
+    let dir = common::temp_dir("cli_outputs_kept");
+    let empty = dir.join("empty.tlog");
+    std::fs::write(&empty, b"").unwrap();
+    let random = dir.join("random.bin");
+    // A fixed xorshift: 200 kB of bytes with no MAVLink in them.
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let bytes: Vec<u8> = (0..200_000)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect();
+    std::fs::write(&random, bytes).unwrap();
+    let missing = dir.join("missing.tlog");
+    let old = "{\"yesterday\":1}\n";
+    let kept = dir.join("d.jsonl");
+    let plot = dir.join("p.svg");
+    let new_file = dir.join("e.jsonl");
+    for input in [&empty, &random, &dir, &missing] {
+        std::fs::write(&kept, old).unwrap();
+        std::fs::write(&plot, old).unwrap();
+        let _ = std::fs::remove_file(&new_file);
+        let (code, _, err) = ahcmon(&[
+            "replay",
+            input.to_str().unwrap(),
+            "--headless",
+            "--decisions",
+            kept.to_str().unwrap(),
+            "--estimates",
+            new_file.to_str().unwrap(),
+            "--plot",
+            plot.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{}: {err}", input.display());
+        assert_eq!(
+            std::fs::read_to_string(&kept).unwrap(),
+            old,
+            "{}",
+            input.display()
+        );
+        assert_eq!(
+            std::fs::read_to_string(&plot).unwrap(),
+            old,
+            "{}",
+            input.display()
+        );
+        assert!(
+            !new_file.exists(),
+            "{}: {} left behind",
+            input.display(),
+            new_file.display()
+        );
+    }
+    // A log with frames and no flight: a completed run with no decision empties the file.
+    let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
+    let head = dir.join("head.tlog");
+    let whole = std::fs::read(&log).unwrap();
+    std::fs::write(&head, &whole[..3000]).unwrap();
+    std::fs::write(&kept, old).unwrap();
+    let (code, _, err) = ahcmon(&[
+        "replay",
+        head.to_str().unwrap(),
+        "--headless",
+        "--decisions",
+        kept.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read_to_string(&kept).unwrap(), "");
+}
+
+/// A log named with an escape sequence and a bell: no control character reaches the terminal
+/// (stdout, stderr) or the SVG (where it is not XML); the name shows as `\u{1b}`.
+#[test]
+fn control_characters_in_a_file_name_are_shown_escaped() {
+    let dir = common::temp_dir("cli_control_chars");
+    let log = dir.join("a\u{1b}[31mred\u{7}.tlog");
+    std::fs::copy(
+        common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog"),
+        &log,
+    )
+    .unwrap();
+    let plot = dir.join("p.svg");
+    let (code, out, err) = ahcmon(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--headless",
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let svg = std::fs::read_to_string(&plot).unwrap();
+    for (what, text) in [("stdout", &out), ("stderr", &err), ("svg", &svg)] {
+        let raw: Vec<char> = text
+            .chars()
+            .filter(|c| c.is_control() && !matches!(c, '\n' | '\t'))
+            .collect();
+        assert!(raw.is_empty(), "{what}: raw {raw:?}");
+    }
+    assert!(out.contains("a\\u{1b}[31mred\\u{7}.tlog"), "{out}");
+    assert!(
+        svg.contains("a\\u{1b}[31mred\\u{7}.tlog"),
+        "the plot's title"
+    );
+}
+
 /// An output that cannot be created is named; a file without MAVLink in it is an input
 /// error (exit 2), not an empty success.
 #[test]

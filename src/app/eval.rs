@@ -78,6 +78,7 @@ pub(crate) fn run_with_files(
     }
     files.echo = print;
     let run = run_vehicle_scenario(named, seed, false, None, &mut files)?;
+    files.finish();
     if let Some(e) = files.error.take() {
         return Err(anyhow::Error::new(e).context("writing JSON lines"));
     }

@@ -4,7 +4,7 @@
 
 use ahcmon::eval::vehicle::sim_config;
 use ahcmon::link::{ConnError, Link, TlogWriter};
-use ahcmon::output::jsonl::{JsonlWriter, NoiseInForce, TruthRecord};
+use ahcmon::output::jsonl::{JsonlFile, NoiseInForce, TruthRecord};
 use ahcmon::protocol::frame::encode_v2;
 use ahcmon::scenario::NamedScenario;
 use ahcmon::sim::vehicle::VehicleSim;
@@ -51,7 +51,7 @@ pub async fn fly(
     opts: &FlyOptions,
     mut link: Option<&mut Link>,
     mut tlog: Option<&mut TlogWriter<BufWriter<File>>>,
-    mut truth: Option<&mut JsonlWriter<BufWriter<File>>>,
+    mut truth: Option<&mut JsonlFile>,
 ) -> Result<FlyReport, FlyError> {
     let (cfg, _) = sim_config(named, opts.seed)?;
     let vehicle = cfg.profile.clone();

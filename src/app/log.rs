@@ -172,13 +172,15 @@ impl Write for Line {
 
 impl Drop for Line {
     fn drop(&mut self) {
+        let text = String::from_utf8_lossy(&self.0);
+        let line = ahcmon::output::printable(&text);
         if let Ok(mut held) = HELD.lock()
             && let Some(held) = held.as_mut()
         {
-            held.keep(String::from_utf8_lossy(&self.0).into_owned());
+            held.keep(line.into_owned());
             return;
         }
-        let _ = std::io::stderr().lock().write_all(&self.0);
+        let _ = std::io::stderr().lock().write_all(line.as_bytes());
     }
 }
 

@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        if let Err(e) = write!(std::io::stdout(), $($arg)*) {
+        let text = format!($($arg)*);
+        if let Err(e) = std::io::stdout().write_all(ahcmon::output::printable(&text).as_bytes()) {
             if e.kind() == std::io::ErrorKind::BrokenPipe {
                 std::process::exit(0);
             }

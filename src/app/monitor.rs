@@ -252,6 +252,9 @@ fn monitor(
         }
         anyhow::Ok(counters)
     });
+    if result.is_ok() {
+        files.finish();
+    }
     // A write error is reported whatever else happened, after the summary when there is one.
     let write_error = files
         .error

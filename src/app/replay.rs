@@ -52,7 +52,8 @@ fn replay(
     let mut files = args.files(&[file], &[("--plot", plot)])?;
     if let Some(p) = plot {
         // Fail now rather than after a long replay.
-        std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
+        ahcmon::output::jsonl::OutputFile::open(p)
+            .with_context(|| format!("cannot write {}", p.display()))?;
         files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
     }
     // The dashboard at a replay speed a person can follow; --fast (the default) is headless.
@@ -153,12 +154,21 @@ fn replay(
     drop(ui);
     drop(held);
     progress.clear();
+    // Not a telemetry log at all: no frame of a message it knows, whose checksum held (a
+    // frame of an unknown id has no checksum to check; random bytes make some). Its output
+    // files stay as they were.
+    let not_a_log = reader.counters.frames == 0;
+    if !not_a_log {
+        files.finish();
+    }
     // Reported after the plot and the summary, which do not depend on the files.
     let write_error = files
         .error
         .take()
         .map(|e| anyhow::Error::new(e).context("writing JSON lines"));
-    write_plot(plot, &files, file)?;
+    if !not_a_log {
+        write_plot(plot, &files, file)?;
+    }
     out!(
         "{}",
         summary::render(&monitor, &reader.counters, &files.seen)
@@ -169,11 +179,10 @@ fn replay(
         replay_time.as_secs_f64()
     );
     write_error.map_or(Ok(()), Err)?;
-    // Not a telemetry log at all: say so with an input error, so a script can tell.
-    let c = &reader.counters;
-    if c.frames == 0 && c.unknown_id == 0 {
+    // An input error, so a script can tell.
+    if not_a_log {
         return Err(UsageError(format!(
-            "{}: no MAVLink frame in its {size} bytes; is it a telemetry log (.tlog)?",
+            "{}: no MAVLink frame of a known message in its {size} bytes; is it a telemetry log (.tlog)? (the output files are left as they were)",
             file.display()
         ))
         .into());
@@ -193,7 +202,8 @@ fn replay_own_log(
     let mut monitor = Monitor::new(args.pipeline_config()?);
     let mut files = args.files(&[file], &[("--plot", plot)])?;
     if let Some(p) = plot {
-        std::fs::write(p, "").with_context(|| format!("cannot write {}", p.display()))?;
+        ahcmon::output::jsonl::OutputFile::open(p)
+            .with_context(|| format!("cannot write {}", p.display()))?;
         files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
     }
     tracing::info!("{}: {}", file.display(), format.name());
@@ -237,6 +247,7 @@ fn replay_own_log(
     };
     monitor.finish(&mut files);
     let replay_time = started.elapsed();
+    files.finish();
     let write_error = files
         .error
         .take()

@@ -153,6 +153,9 @@ fn sim_mavlink(named: &NamedScenario, o: SimOutput) -> anyhow::Result<()> {
             _ = tokio::signal::ctrl_c() => anyhow::Ok(None),
         }
     })?;
+    if let Some(t) = truth.as_mut() {
+        t.finish().context("writing the truth")?;
+    }
     let Some(report) = report else {
         if let Some(w) = tlog.as_mut() {
             w.flush().context("writing the tlog")?;

@@ -434,6 +434,10 @@ fn left_inverse(
         return None;
     }
     let b = DMatrix::from_fn(m, l, |i, j| effect[i][j] / sigma[i]);
+    // nalgebra's SVD panics on NaN and never returns on an infinity.
+    if !b.iter().all(|v| v.is_finite()) {
+        return None;
+    }
     let sv = b.clone().svd(false, false).singular_values;
     let (smax, smin) = (sv.max(), sv.min());
     if !(smax.is_finite() && smin > 1e-9 * smax) {

@@ -1,5 +1,11 @@
 //! JSON-lines files: decisions, estimates and the simulator's truth. One
 //! object per line, flushed per line so a reader (or a crash) never sees half a record.
+//!
+//! An output file is opened when the run starts (so a path that cannot be written fails at
+//! once) but not emptied: an existing file is replaced in place when the run writes its first
+//! line, or at its end ([`Outputs::finish`]) if it wrote none. A run that stops on an error
+//! before either (an input that is not a log, an empty one) leaves the file as it was. Not a
+//! rename: a live run's lines are in the named file as they are made (`tail -f`).
 
 use crate::diagnose::vehicle::Decision;
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
@@ -19,14 +25,84 @@ pub struct JsonlWriter<W: Write> {
     name: Option<String>,
 }
 
-impl JsonlWriter<BufWriter<File>> {
-    /// Create (truncate) the file; the error names it.
-    pub fn create(path: &Path) -> std::io::Result<Self> {
-        let file = File::create(path)
+/// A file opened for writing without emptying it: emptied before its first byte is written,
+/// or by [`OutputFile::empty`] (see the module note).
+#[derive(Debug)]
+pub struct OutputFile {
+    file: File,
+    emptied: bool,
+    /// The file this run created (it did not exist): removed when the run ends without
+    /// writing or emptying it (it stopped on an error).
+    created: Option<std::path::PathBuf>,
+}
+
+impl OutputFile {
+    /// Open (create if missing) without truncating; the error names the file.
+    pub fn open(path: &Path) -> std::io::Result<Self> {
+        let existed = std::fs::symlink_metadata(path).is_ok();
+        let file = std::fs::OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(path)
             .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
-        let mut w = Self::new(BufWriter::new(file));
+        Ok(Self {
+            file,
+            emptied: false,
+            created: (!existed).then(|| path.to_path_buf()),
+        })
+    }
+
+    /// Empty the file unless done already (a device or a pipe has nothing to empty).
+    pub fn empty(&mut self) -> std::io::Result<()> {
+        if !self.emptied {
+            if self.file.metadata()?.is_file() {
+                self.file.set_len(0)?;
+            }
+            self.emptied = true;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for OutputFile {
+    fn drop(&mut self) {
+        if let (false, Some(path)) = (self.emptied, &self.created)
+            && self.file.metadata().is_ok_and(|m| m.len() == 0)
+        {
+            let _ = std::fs::remove_file(path);
+        }
+    }
+}
+
+impl Write for OutputFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.empty()?;
+        self.file.write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+/// A JSON-lines output file.
+pub type JsonlFile = JsonlWriter<BufWriter<OutputFile>>;
+
+impl JsonlFile {
+    /// Open the file for this run (see the module note); the error names it.
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        let mut w = Self::new(BufWriter::new(OutputFile::open(path)?));
         w.name = Some(path.display().to_string());
         Ok(w)
+    }
+
+    /// The run is over: a file it wrote nothing to is emptied (its outputs are none).
+    pub fn finish(&mut self) -> std::io::Result<()> {
+        let r = self.out.flush().and_then(|()| self.out.get_mut().empty());
+        r.map_err(|e| match &self.name {
+            Some(name) => std::io::Error::new(e.kind(), format!("{name}: {e}")),
+            None => e,
+        })
     }
 }
 
@@ -171,10 +247,10 @@ fn keep_first(slot: &mut Option<std::io::Error>, r: std::io::Result<()>) {
 /// `monitor` and `calibrate` (any number of vehicles) and for `sim` and `eval`. The first
 /// write error is kept and reported at the end (nothing panics, nothing is silently dropped).
 pub struct Outputs {
-    pub decisions: Option<JsonlWriter<BufWriter<File>>>,
-    pub estimates: Option<JsonlWriter<BufWriter<File>>>,
+    pub decisions: Option<JsonlFile>,
+    pub estimates: Option<JsonlFile>,
     /// The simulator's truth, with the sensor noise in force (`sim --truth`).
-    pub truth: Option<(JsonlWriter<BufWriter<File>>, f64, f64)>,
+    pub truth: Option<(JsonlFile, f64, f64)>,
     /// Write every k-th step's estimates (per vehicle).
     pub decimate: u64,
     steps: std::collections::BTreeMap<u8, u64>,
@@ -213,6 +289,22 @@ impl Outputs {
     pub fn with_truth(mut self, path: &Path, gyro: f64, az: f64) -> std::io::Result<Self> {
         self.truth = Some((JsonlWriter::create(path)?, gyro, az));
         Ok(self)
+    }
+
+    /// The run is over: every output it wrote nothing to is emptied (see the module note).
+    /// Not called when a run stops on an error, so its files stay as they were.
+    pub fn finish(&mut self) {
+        let mut results = vec![];
+        for w in [&mut self.decisions, &mut self.estimates]
+            .into_iter()
+            .flatten()
+            .chain(self.truth.as_mut().map(|t| &mut t.0))
+        {
+            results.push(w.finish());
+        }
+        for r in results {
+            self.keep(r);
+        }
     }
 
     fn keep(&mut self, r: std::io::Result<()>) {

@@ -9,6 +9,23 @@ pub mod summary;
 pub mod svg;
 pub mod table;
 
+/// Text for a terminal or a file format: control characters (from file names, say, which
+/// may hold an escape sequence) shown as `\u{1b}`, never written raw; line feeds and tabs stay.
+pub fn printable(s: &str) -> std::borrow::Cow<'_, str> {
+    if !s.chars().any(|c| c.is_control() && c != '\n' && c != '\t') {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    let mut out = String::with_capacity(s.len() + 16);
+    for c in s.chars() {
+        if c.is_control() && c != '\n' && c != '\t' {
+            out.push_str(&format!("\\u{{{:x}}}", c as u32));
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
 use crate::diagnose::vehicle::Decision;
 use crate::estimate::vehicle::AhcEstimate;
 use crate::sim::vehicle::VehicleSample;

@@ -21,6 +21,11 @@ struct Panel<'a> {
 
 /// Text for an SVG text node: names come from files and profiles (`R&D.tlog`).
 fn xml(s: &str) -> std::borrow::Cow<'_, str> {
+    // Control characters are not XML 1.0 text.
+    let s = match super::printable(s) {
+        std::borrow::Cow::Borrowed(s) => s,
+        std::borrow::Cow::Owned(o) => return std::borrow::Cow::Owned(xml(&o).into_owned()),
+    };
     if !s.contains(['&', '<', '>', '"', '\'']) {
         return std::borrow::Cow::Borrowed(s);
     }

@@ -222,14 +222,23 @@ fn instrumental(
     y: &DVector<f64>,
 ) -> Option<(DVector<f64>, f64, f64)> {
     let a = z.transpose() * x;
+    let zy = z.transpose() * y;
+    // nalgebra's SVD panics on NaN and never returns on an infinity.
+    if !(all_entries_finite(&a) && zy.iter().all(|v| v.is_finite())) {
+        return None;
+    }
     let svd = a.clone().svd(true, true);
     let (s_max, s_min) = (svd.singular_values.max(), svd.singular_values.min());
     if s_max.is_nan() || s_max <= 0.0 || s_min < 1e-10 * s_max {
         return None;
     }
-    let beta = svd.solve(&(z.transpose() * y), 1e-14 * s_max).ok()?;
+    let beta = svd.solve(&zy, 1e-14 * s_max).ok()?;
     let (r2, sd) = fit_quality(x, y, &beta);
     Some((beta, r2, sd))
+}
+
+fn all_entries_finite(m: &DMatrix<f64>) -> bool {
+    m.iter().all(|v| v.is_finite())
 }
 
 /// Every sample has `l` commands and finite numbers.
@@ -255,6 +264,10 @@ fn fit_quality(x: &DMatrix<f64>, y: &DVector<f64>, beta: &DVector<f64>) -> (f64,
 
 /// Least squares by SVD with a rank check; returns (coefficients, R², residual std).
 fn least_squares(x: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, f64, f64)> {
+    // nalgebra's SVD panics on NaN and never returns on an infinity.
+    if !(all_entries_finite(x) && y.iter().all(|v| v.is_finite())) {
+        return None;
+    }
     let svd = x.clone().svd(true, true);
     let s_max = svd.singular_values.max();
     let s_min = svd.singular_values.min();

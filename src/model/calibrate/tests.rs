@@ -151,3 +151,22 @@ fn a_filled_sample_is_no_rows_target() {
     assert_eq!(unbroken_rows(&samples, 2, 0), [2, 3, 6, 7]);
     assert_eq!(unbroken_rows(&samples, 1, 1), [1, 2, 6]);
 }
+
+/// A fit with a non-finite number is no fit (nalgebra's SVD would panic on the NaN and never
+/// return on the infinity).
+#[test]
+fn least_squares_of_non_finite_numbers_is_none() {
+    let x = DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+    let y = DVector::from_vec(vec![1.0, 2.0, 3.0]);
+    assert!(least_squares(&x, &y).is_some());
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut xb = x.clone();
+        xb[(1, 1)] = bad;
+        assert!(least_squares(&xb, &y).is_none());
+        assert!(instrumental(&xb, &x, &y).is_none());
+        let mut yb = y.clone();
+        yb[2] = bad;
+        assert!(least_squares(&x, &yb).is_none());
+        assert!(instrumental(&x, &x, &yb).is_none());
+    }
+}

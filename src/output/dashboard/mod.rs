@@ -289,7 +289,7 @@ impl TerminalUi {
             history: ChartHistory::new(30.0),
             ui: UiState::default(),
             link: LinkInfo {
-                name: link_name.to_string(),
+                name: crate::output::printable(link_name).into_owned(),
                 ..Default::default()
             },
             frames_window: VecDeque::new(),

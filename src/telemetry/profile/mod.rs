@@ -288,22 +288,7 @@ impl Profile {
             }
         }
         let m = &self.model;
-        let numbers = m
-            .damping
-            .iter()
-            .chain(&m.offset)
-            .chain(&[
-                m.vertical_offset,
-                m.roll_gain,
-                m.pitch_gain,
-                m.yaw_gain,
-                m.thrust_gain,
-                m.collective_yaw,
-            ])
-            .all(|v| v.is_finite());
-        if !numbers || m.damping.iter().any(|d| *d < 0.0) {
-            return Err("model: numbers must be finite and damping non-negative".into());
-        }
+        check_ranges(&self.numbers())?;
         if !(self.diagnosis.threshold.is_finite() && self.diagnosis.threshold > 0.0) {
             return Err("diagnosis.threshold must be positive".into());
         }
@@ -446,6 +431,81 @@ impl Profile {
         Ok(())
     }
 
+    /// Every number of the profile with its key and the range it must lie in (finite, and
+    /// far from what overflows the models' products: the calibration's least squares square
+    /// them, an SVD of a non-finite matrix panics or never returns).
+    fn numbers(&self) -> Vec<(String, f64, f64, f64)> {
+        const GAIN: f64 = 1e5; // rad/s² or m/s² per unit of command
+        let m = &self.model;
+        let mut out: Vec<(String, f64, f64, f64)> =
+            vec![("rate_hz".into(), self.rate_hz, 0.0, 1e4)];
+        for (i, axis) in ["p", "q", "r"].iter().enumerate() {
+            out.push((format!("model.damping ({axis})"), m.damping[i], 0.0, 1e3));
+            out.push((format!("model.offset ({axis})"), m.offset[i], -1e4, 1e4));
+        }
+        for (key, v) in [
+            ("model.vertical_offset", m.vertical_offset),
+            ("model.roll_gain", m.roll_gain),
+            ("model.pitch_gain", m.pitch_gain),
+            ("model.yaw_gain", m.yaw_gain),
+            ("model.thrust_gain", m.thrust_gain),
+            ("model.collective_yaw", m.collective_yaw),
+        ] {
+            out.push((key.into(), v, -GAIN, GAIN));
+        }
+        if let Some(a) = &m.arx {
+            out.push(("model.arx.dt".into(), a.dt, 0.0, 10.0));
+            let rows = a.phi.iter().chain(&a.previous_increment).chain(&a.input);
+            for v in rows.flatten().chain(&a.offset).chain(&a.vertical) {
+                out.push(("model.arx".into(), *v, -GAIN, GAIN));
+            }
+            out.push((
+                "model.arx.vertical_offset".into(),
+                a.vertical_offset,
+                -GAIN,
+                GAIN,
+            ));
+        }
+        let n = &self.noise;
+        for (key, v, hi) in [
+            ("noise.gyro", n.gyro, 10.0),
+            ("noise.az", n.az, 100.0),
+            ("noise.rate_process", n.rate_process, 100.0),
+            ("noise.gamma_process", n.gamma_process, 10.0),
+            ("noise.delta_process", n.delta_process, 10.0),
+        ] {
+            out.push((key.into(), v, 0.0, hi));
+        }
+        let d = &self.diagnosis;
+        out.push(("diagnosis.threshold".into(), d.threshold, 0.0, 10.0));
+        if let Some(g) = d.gain_threshold {
+            out.push(("diagnosis.gain_threshold".into(), g, 0.0, 10.0));
+        }
+        for g in d.gusts.iter().flatten() {
+            out.push(("diagnosis.gusts".into(), *g, 0.0, 1e4));
+        }
+        for a in &self.actuators {
+            let key = |k: &str| format!("actuator `{}`: {k}", a.name);
+            for (k, v) in [
+                ("pwm_min", a.pwm_min),
+                ("pwm_trim", a.pwm_trim),
+                ("pwm_max", a.pwm_max),
+            ] {
+                out.push((key(k), v, 0.0, 65535.0));
+            }
+            if let Some(v) = a.angle_deg {
+                out.push((key("angle_deg"), v, -360.0, 360.0));
+            }
+            for v in a.effectiveness.iter().flatten() {
+                out.push((key("effectiveness"), *v, -GAIN, GAIN));
+            }
+            if let Some(v) = a.vertical {
+                out.push((key("vertical"), v, -GAIN, GAIN));
+            }
+        }
+        out
+    }
+
     /// The `G` column and vertical effectiveness of actuator `j` (geometry or explicit).
     pub fn column(&self, j: usize) -> ([f64; 3], f64) {
         let a = &self.actuators[j];
@@ -567,6 +627,31 @@ pub fn normalise(a: &ActuatorSpec, pwm: f64) -> f64 {
         (false, _) => u,
         (true, false) => -u,
         (true, true) => 1.0 - u,
+    }
+}
+
+/// Each `(key, value, lo, hi)` within `lo..=hi` (NaN never is).
+fn check_ranges(numbers: &[(String, f64, f64, f64)]) -> Result<(), String> {
+    match numbers
+        .iter()
+        .find(|(_, v, lo, hi)| !(lo..=hi).contains(&v))
+    {
+        Some((key, v, lo, hi)) => {
+            let show = |x: f64| {
+                if x.is_finite() && x.abs() >= 1e5 {
+                    format!("{x:e}")
+                } else {
+                    format!("{x}")
+                }
+            };
+            Err(format!(
+                "{key} must be within {}..{} (got {})",
+                show(*lo),
+                show(*hi),
+                show(*v)
+            ))
+        }
+        None => Ok(()),
     }
 }
 

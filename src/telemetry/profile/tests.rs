@@ -118,3 +118,54 @@ fn the_gust_factor_scales_with_the_measured_gusts() {
     );
     assert!(Profile::from_toml(&text, "plane.toml").is_err());
 }
+
+/// Numbers that are not finite, or so large that the calibration's products overflow, are
+/// refused with their key before any maths runs (they used to reach nalgebra's SVD, which
+/// panics on NaN and never returns on an infinity).
+#[test]
+fn out_of_range_numbers_are_refused_with_their_key() {
+    let quad = include_str!("../../../replay/profiles/quad-x.toml");
+    let first_angle = "angle_deg = 45.0";
+    assert!(quad.contains(first_angle) && quad.contains("roll_gain = 60.0"));
+    for (text, key) in [
+        (
+            quad.replace("roll_gain = 60.0", "roll_gain = 1e308"),
+            "model.roll_gain",
+        ),
+        (
+            quad.replacen(first_angle, "angle_deg = inf", 1),
+            "angle_deg",
+        ),
+        (
+            quad.replacen(first_angle, "angle_deg = nan", 1),
+            "angle_deg",
+        ),
+        (
+            quad.replacen(first_angle, "angle_deg = 45.0\nvertical = nan", 1),
+            "vertical",
+        ),
+        (
+            quad.replacen(
+                first_angle,
+                "angle_deg = 45.0\neffectiveness = [1e300, 0.0, 0.0]",
+                1,
+            ),
+            "effectiveness",
+        ),
+        (
+            quad.replacen("[[actuator]]", "[[actuator]]\npwm_max = 1e9", 1),
+            "pwm_max",
+        ),
+        (quad.replace("gyro = ", "gyro = 1e6 #"), "noise.gyro"),
+    ] {
+        let e = Profile::from_toml(&text, "x.toml").unwrap_err().to_string();
+        assert!(
+            e.contains(key) && e.contains("must be within"),
+            "{key}: {e}"
+        );
+    }
+    // Every built-in profile is inside the ranges.
+    for (name, _) in BUILTIN {
+        Profile::resolve(name).unwrap();
+    }
+}
