@@ -25,9 +25,21 @@ impl Monitor {
     }
 
     pub fn on_frame(&mut self, frame: &Frame, sink: &mut dyn Sink) {
+        self.on_frame_at(frame, None, sink);
+    }
+
+    /// [`Self::on_frame`] with the frame's arrival time (s, any origin: a live link's
+    /// monotonic clock, a tlog's receive stamp), which the vehicle clock's jumps must agree
+    /// with (`telemetry::assembler::REBOOT_ARRIVAL_S`).
+    pub fn on_frame_at(&mut self, frame: &Frame, arrival: Option<f64>, sink: &mut dyn Sink) {
         self.samples.clear();
-        self.assembler
-            .on_frame(frame.sysid, frame.compid, &frame.msg, &mut self.samples);
+        self.assembler.on_frame_at(
+            frame.sysid,
+            frame.compid,
+            &frame.msg,
+            arrival,
+            &mut self.samples,
+        );
         self.assembler
             .on_sequence(frame.sysid, frame.compid, frame.seq);
         self.run(frame.sysid, sink);

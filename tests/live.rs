@@ -126,6 +126,78 @@ fn heli_servo_fault_over_udp_between_two_processes() {
     );
 }
 
+/// Two forged ATTITUDEs of the vehicle's system id from another socket, back to back,
+/// stamped 1.0 and 1.6 s, 25 s into a live flight: they used to confirm a "reboot" (filters
+/// reset, a new calibration, and the flight's real motor fault missed). Now refused (their
+/// arrival does not cover the clock they claim): no reset, the real fault found on time.
+#[test]
+fn two_forged_frames_during_a_live_flight_change_no_decision() {
+    use ahcmon::protocol::dialects::ahcmon::{ATTITUDE_DATA, MavMessage};
+    let dir = common::temp_dir("live_forged");
+    let dec = dir.join("decisions.jsonl");
+    let port = free_udp_port();
+    let monitor = Command::new(bin())
+        .args([
+            "monitor",
+            &format!("udpin:127.0.0.1:{port}"),
+            "--headless",
+            "--exit-idle",
+            "2",
+        ])
+        .arg("--decisions")
+        .arg(&dec)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let sim = Command::new(bin())
+        .args([
+            "sim",
+            "--scenario",
+            "quad-x-motor2-loe-live",
+            "--speed",
+            "10",
+        ])
+        .arg("--out")
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // 25 s of flight at 10x (the monitor is estimating by then).
+    std::thread::sleep(std::time::Duration::from_millis(3500));
+    let forger = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut frame = Vec::new();
+    for (seq, ms) in [(7u8, 1000u32), (8, 1600)] {
+        let msg = MavMessage::ATTITUDE(ATTITUDE_DATA {
+            time_boot_ms: ms,
+            ..Default::default()
+        });
+        ahcmon::protocol::frame::encode_v2(1, 1, seq, &msg, &mut frame);
+        forger.send_to(&frame, ("127.0.0.1", port)).unwrap();
+    }
+    assert!(sim.wait_with_output().unwrap().status.success());
+    let out = monitor.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        summary.contains("clock: 1 jumps of the vehicle clock"),
+        "the forged pair was not seen and refused: {summary}"
+    );
+    let ds = decisions(&dec);
+    assert!(!ds.iter().any(|d| d["event"] == "filter_reset"), "{ds:?}");
+    let f = faults(&ds, 1);
+    assert!(!f.is_empty(), "the real fault was missed: {ds:?}");
+    assert!(f.iter().all(|d| d["actuator"] == "motor2"), "{f:?}");
+    // The fault is at 35 s of flight = 45 s of vehicle time.
+    let t = f[0]["t"].as_f64().unwrap();
+    assert!((45.0..=48.0).contains(&t), "decided at {t}");
+}
+
 #[test]
 fn two_vehicles_at_once_keep_their_own_decisions() {
     let ds = run_live(

@@ -156,7 +156,7 @@ pub async fn run(
                         let _ = vehicle_tx.send(out).await;
                     }
                 }
-                monitor.on_frame(&frame, sink);
+                monitor.on_frame_at(&frame, Some(now.duration_since(clock).as_secs_f64()), sink);
                 // The alerts speak as a vehicle's system id from when the vehicle is known.
                 if let Some(a) = sink.alerts.as_mut()
                     && monitor.assembler.vehicles.contains_key(&frame.sysid)

@@ -113,7 +113,8 @@ fn replay(
                 None => {}
             }
         }
-        monitor.on_frame(&frame, &mut files);
+        // The tlog's stamp is the ground station's receive time.
+        monitor.on_frame_at(&frame, Some(ts as f64 * 1e-6), &mut files);
         // Every estimate into the chart: at 10 redraws a second, a replay as fast as the CPU
         // goes charted only the last second of the log.
         if let Some(ui) = ui.as_mut() {

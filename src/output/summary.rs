@@ -61,6 +61,13 @@ pub fn render(
             c.non_finite,
             c.lost_frames
         );
+        if c.clock_jumps_refused > 0 {
+            let _ = writeln!(
+                s,
+                "  clock: {} jumps of the vehicle clock refused: a new boot whose frames did not arrive over the time they claim, or a jump ahead the next messages went back on (forged or corrupt stamps)",
+                c.clock_jumps_refused
+            );
+        }
         if c.interpolated + c.unpaired_outputs > 0 {
             let _ = writeln!(
                 s,

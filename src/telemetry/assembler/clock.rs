@@ -4,13 +4,23 @@
 //! autopilot's sequence numbers counting the frames lost on the way.
 
 use super::{
-    REBOOT_BACKSTEP_S, REBOOT_CONFIRM_S, REBOOT_HOLD_S, TelemetrySample, VehicleAssembler,
+    REBOOT_ARRIVAL_S, REBOOT_BACKSTEP_S, REBOOT_CONFIRM_S, REBOOT_HOLD_S, TelemetrySample,
+    VehicleAssembler,
 };
 use crate::protocol::MavMessage;
 
 /// Whether `t` can be on the same new clock as `first`, the first message seen on it.
 fn on_new_clock(first: f64, t: f64) -> bool {
     (first - REBOOT_BACKSTEP_S..=first + REBOOT_CONFIRM_S).contains(&t)
+}
+
+/// Whether the arrival clock has run at least `needed` s from `since` to `now`; an unknown or
+/// standing arrival clock tells nothing (true).
+fn arrival_ran(since: Option<f64>, now: Option<f64>, needed: f64) -> bool {
+    match (since, now) {
+        (Some(a), Some(b)) if b != a => b - a >= needed,
+        _ => true,
+    }
 }
 
 /// Unwrap a u32 µs stamp (SERVO_OUTPUT_RAW wraps every 71.6 min) next to a reference time:
@@ -64,17 +74,59 @@ impl VehicleAssembler {
             self.ticked = true;
             self.reboot_candidate = None;
             self.clock = Some(c.max(t));
+            if self
+                .clock_before_jump
+                .is_some_and(|(_, target)| t > target + REBOOT_CONFIRM_S)
+            {
+                self.clock_before_jump = None;
+            }
+            return true;
+        }
+        // Back on the clock from before the last jump ahead: the jump's two messages were
+        // forged or corrupt, not a clock that ran on (a reboot starts far behind it).
+        if let Some((before, _)) = self.clock_before_jump
+            && t >= before - REBOOT_BACKSTEP_S
+        {
+            self.clock_before_jump = None;
+            self.counters.clock_jumps_refused += 1;
+            self.ticked = true;
+            self.reboot_candidate = None;
+            self.clock = Some(t);
+            // What the jump's messages left waiting to be paired is theirs.
+            let after = |stamp: f64| stamp > t + REBOOT_BACKSTEP_S;
+            if self.rates.is_some_and(|r| after(r.t)) {
+                self.rates = None;
+                self.rates_prev = None;
+            }
+            if self.outputs.is_some_and(|o| after(o.t)) {
+                self.outputs = None;
+            }
+            if self.az.is_some_and(|a| after(a.t)) {
+                self.az = None;
+            }
+            if self.pending.is_some_and(|p| after(p.t)) {
+                self.pending = None;
+            }
+            if self.last_sample_t.is_some_and(after) {
+                self.last_sample_t = None;
+            }
             return true;
         }
         // The first message on the new clock, if this one is on it too.
         let first = self
             .reboot_candidate
             .filter(|&first| on_new_clock(first, t));
-        if !first.is_some_and(|first| t - first >= REBOOT_HOLD_S) {
+        let held_long = first.is_some_and(|first| t - first >= REBOOT_HOLD_S);
+        let arrived_over = arrival_ran(self.arrival_at_candidate, self.arrival, REBOOT_ARRIVAL_S);
+        if held_long && !arrived_over {
+            self.counters.clock_jumps_refused += 1;
+        }
+        if !(held_long && arrived_over) {
             // Not (yet) enough of the new clock: dropped and counted.
             if first.is_none() {
                 self.lost_at_reboot_candidate = self.lost_at_last_tick;
                 self.held_at_reboot_candidate = 0;
+                self.arrival_at_candidate = self.arrival;
             }
             self.reboot_candidate = Some(first.unwrap_or(t));
             self.counters.out_of_order += 1;
@@ -109,6 +161,7 @@ impl VehicleAssembler {
         self.seq = None;
         self.counters.lost_frames = self.lost_at_reboot_candidate;
         self.clock = Some(t);
+        self.clock_before_jump = None;
         true
     }
 
@@ -189,6 +242,7 @@ impl VehicleAssembler {
                 .clock_stamp(compid, msg, Some(held_t))
                 .is_some_and(|t| (t - held_t).abs() <= REBOOT_BACKSTEP_S);
             if confirms {
+                self.clock_before_jump = self.clock.map(|before| (before, held_t));
                 self.clock = Some(held_t);
                 self.use_message(held_compid, &held, out);
                 self.use_message(compid, msg, out);

@@ -23,6 +23,15 @@ const G0: f64 = 9.80665;
 const REBOOT_BACKSTEP_S: f64 = 1.0;
 pub const REBOOT_HOLD_S: f64 = 0.5;
 const REBOOT_CONFIRM_S: f64 = 5.0;
+/// Where frames carry their arrival time (a live link's, a tlog's receive stamps), a new
+/// boot's clock is confirmed only once its messages have arrived over at least this long, with
+/// none on the old clock in between: two forged ATTITUDEs sent back to back, stamped 1.0 and
+/// 1.6 s, used to confirm a "reboot" and reset the filters; a real vehicle's messages on the
+/// old clock keep coming within it and refute them. An arrival clock that stands still (a log
+/// written without receive times) tells nothing. (A jump ahead is not held to the arrival
+/// clock: logs whose message types stamp from clocks seconds apart make such jumps; one that
+/// the next messages go back on is undone instead, see `clock_before_jump`.)
+pub const REBOOT_ARRIVAL_S: f64 = 0.25;
 
 /// One instant of one vehicle: what an estimator step needs, before normalisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,6 +62,10 @@ pub struct TelemetryCounters {
     pub duplicates: u64,
     /// Vehicle clock jumped back by more than a second (confirmed by a second message).
     pub reboots: u64,
+    /// Jumps of the vehicle clock refused: a new boot's whose messages did not arrive over
+    /// [`REBOOT_ARRIVAL_S`] (each message that would have confirmed it, dropped), and jumps
+    /// ahead undone by the next messages.
+    pub clock_jumps_refused: u64,
     /// Messages stamped more than a second ahead of the vehicle clock that no second message
     /// on the same clock had confirmed: dropped. One corrupt stamp (a CRC-valid ATTITUDE with
     /// a wild `time_boot_ms`) used to move the clock far ahead, and everything after it was
@@ -162,6 +175,14 @@ pub struct VehicleAssembler {
     /// The last message stamped more than a second ahead of the clock (its stamp, component
     /// and the message), held until the next one confirms the jump.
     held_ahead: Option<(f64, u8, MavMessage)>,
+    /// The arrival time of the frame being read (s, any origin; `None`: not known) and of the
+    /// reboot candidate's first ([`REBOOT_ARRIVAL_S`]).
+    arrival: Option<f64>,
+    arrival_at_candidate: Option<f64>,
+    /// The clock before the last jump ahead and the jump's target, until the clock has run
+    /// `REBOOT_CONFIRM_S` past it: a message back on the old clock undoes the jump (two forged
+    /// frames far ahead, then the real stream) instead of reading as a reboot.
+    clock_before_jump: Option<(f64, f64)>,
     /// The vehicle sends IMU accelerations: a complete instant waits for its a_z.
     has_imu: bool,
     /// Smoothed interval between rate instants (s), once seen: the pairing tolerance stays
@@ -230,6 +251,9 @@ impl VehicleAssembler {
             rebooted: false,
             reboot_candidate: None,
             held_ahead: None,
+            arrival: None,
+            arrival_at_candidate: None,
+            clock_before_jump: None,
             has_imu: false,
             rate_period: None,
             pending: None,
@@ -491,6 +515,19 @@ impl Assembler {
         msg: &MavMessage,
         out: &mut Vec<TelemetrySample>,
     ) {
+        self.on_frame_at(sysid, compid, msg, None, out);
+    }
+
+    /// [`Self::on_frame`] with the frame's arrival time (s, any origin): jumps of the
+    /// vehicle clock must agree with it ([`REBOOT_ARRIVAL_S`]).
+    pub fn on_frame_at(
+        &mut self,
+        sysid: u8,
+        compid: u8,
+        msg: &MavMessage,
+        arrival: Option<f64>,
+        out: &mut Vec<TelemetrySample>,
+    ) {
         if sysid == 255 || sysid == 0 {
             return;
         }
@@ -511,6 +548,7 @@ impl Assembler {
                 .insert(sysid, VehicleAssembler::new(sysid, self.cfg));
         }
         if let Some(v) = self.vehicles.get_mut(&sysid) {
+            v.arrival = arrival.filter(|a| a.is_finite());
             v.on_message(compid, msg, out);
         }
     }

@@ -451,3 +451,93 @@ fn the_autopilot_component_takes_over_from_an_earlier_claimant() {
     }
     assert_eq!(out.len(), 5);
 }
+
+/// Feed `msgs` through the fleet assembler as frames that arrived at `arrival` (s).
+fn feed_at(a: &mut Assembler, arrival: f64, msgs: &[MavMessage]) -> Vec<TelemetrySample> {
+    let mut out = Vec::new();
+    for m in msgs {
+        a.on_frame_at(1, 1, m, Some(arrival), &mut out);
+    }
+    out
+}
+
+/// Two forged ATTITUDEs sent back to back (stamped 1.0 and 1.6 s) during a flight at 600 s
+/// used to confirm a reboot (the filters reset, the calibration restarted and a real fault was
+/// missed). Arriving within a millisecond they do not cover `REBOOT_ARRIVAL_S` of arrival
+/// time: no reboot, the flight's samples go on. A real reboot, whose new clock arrives over
+/// time, is still confirmed.
+#[test]
+fn two_forged_frames_do_not_make_a_reboot_but_a_real_one_does() {
+    let mut a = Assembler::new(AssemblerConfig::default());
+    let mut samples = 0;
+    for k in 0..100u32 {
+        let ms = 600_000 + 20 * k;
+        let at = f64::from(k) * 0.02;
+        samples += feed_at(&mut a, at, &[attitude(ms), outputs(ms, 1500)]).len();
+        if k == 50 {
+            feed_at(&mut a, at + 0.0005, &[attitude(1000)]);
+            feed_at(&mut a, at + 0.0006, &[attitude(1600)]);
+        }
+    }
+    let v = &a.vehicles[&1];
+    assert!(!v.rebooted);
+    assert_eq!(v.counters.reboots, 0);
+    assert_eq!(v.counters.clock_jumps_refused, 1);
+    assert_eq!(samples, 100);
+    // Without arrival times the same two frames are a reboot (the rule needs them).
+    let mut b = VehicleAssembler::new(1, AssemblerConfig::default());
+    feed(&mut b, &[attitude(600_000), outputs(600_000, 1500)]);
+    feed(&mut b, &[attitude(1000), attitude(1600)]);
+    assert_eq!(b.counters.reboots, 1);
+    // A real reboot: the stream stops, the new boot's messages arrive at their own pace.
+    for k in 0..50u32 {
+        let ms = 2_000 + 20 * k;
+        feed_at(
+            &mut a,
+            10.0 + f64::from(k) * 0.02,
+            &[attitude(ms), outputs(ms, 1500)],
+        );
+    }
+    let v = &a.vehicles[&1];
+    assert!(v.rebooted);
+    assert_eq!(v.counters.reboots, 1);
+}
+
+/// Two forged frames stamped far ahead move the clock (a second message on the same clock
+/// confirms a jump: an outage does that); the real stream's next message, back on the clock
+/// from before the jump, undoes it instead of starting a reboot that its messages, arriving
+/// over time, would confirm. Nothing of the real stream is lost. A real outage stays taken.
+#[test]
+fn a_jump_ahead_the_next_messages_go_back_on_is_undone() {
+    let mut a = Assembler::new(AssemblerConfig::default());
+    let mut samples = 0;
+    for k in 0..100u32 {
+        let ms = 600_000 + 20 * k;
+        let at = f64::from(k) * 0.02;
+        samples += feed_at(&mut a, at, &[attitude(ms), outputs(ms, 1500)]).len();
+        if k == 50 {
+            feed_at(&mut a, at + 0.0005, &[attitude(700_000)]);
+            feed_at(&mut a, at + 0.0006, &[attitude(700_020)]);
+        }
+    }
+    let v = &a.vehicles[&1];
+    assert_eq!(samples, 100);
+    assert_eq!((v.counters.reboots, v.counters.clock_jumps_refused), (0, 1));
+    assert!(!v.rebooted);
+    assert!(v.clock().unwrap() < 610.0);
+    // A 100 s outage: the stream comes back 100 s later and stays.
+    let got: usize = (0..10u32)
+        .map(|k| {
+            let ms = 702_000 + 20 * k;
+            feed_at(
+                &mut a,
+                102.0 + f64::from(k) * 0.02,
+                &[attitude(ms), outputs(ms, 1500)],
+            )
+            .len()
+        })
+        .sum();
+    assert!(got >= 9, "{got}");
+    let v = &a.vehicles[&1];
+    assert_eq!((v.counters.reboots, v.counters.clock_jumps_refused), (0, 1));
+}
