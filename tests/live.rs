@@ -198,6 +198,74 @@ fn two_forged_frames_during_a_live_flight_change_no_decision() {
     assert!((45.0..=48.0).contains(&t), "decided at {t}");
 }
 
+/// One autopilot HEARTBEAT from each of 252 stray system ids, then silence: none of them sent
+/// a sample, so none is a vehicle to lose (they made 252 `link_lost` decisions).
+#[test]
+fn stray_system_ids_make_no_decisions() {
+    use ahcmon::protocol::dialects::ahcmon::{
+        HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
+    };
+    let dir = common::temp_dir("live_stray");
+    let dec = dir.join("decisions.jsonl");
+    let port = free_udp_port();
+    let monitor = Command::new(bin())
+        .args([
+            "monitor",
+            &format!("udpin:127.0.0.1:{port}"),
+            "--headless",
+            "--exit-idle",
+            "3",
+        ])
+        .arg("--decisions")
+        .arg(&dec)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_STANDBY,
+        mavlink_version: 3,
+    });
+    let mut frame = Vec::new();
+    for sysid in 2..=253u8 {
+        ahcmon::protocol::frame::encode_v2(sysid, 1, 0, &msg, &mut frame);
+        sender.send_to(&frame, ("127.0.0.1", port)).unwrap();
+    }
+    let out = monitor.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let ds = decisions(&dec);
+    assert!(ds.is_empty(), "{} decisions: {:?}", ds.len(), ds.first());
+}
+
+/// Two simulated vehicles with the same system id: the monitor cannot tell their streams
+/// apart, and says so as a decision (it used to be a stderr line only), once, naming both
+/// senders.
+#[test]
+fn one_system_id_from_two_senders_is_a_decision() {
+    let ds = run_live(
+        &[("quad-x-motor2-loe-live", 1), ("quad-x-motor2-loe-live", 1)],
+        "live_two_senders",
+    );
+    let mixed: Vec<&Value> = ds.iter().filter(|d| d["event"] == "contaminated").collect();
+    assert_eq!(mixed.len(), 1, "{mixed:?}");
+    assert_eq!(mixed[0]["sysid"], 1);
+    let detail = mixed[0]["detail"].as_str().unwrap();
+    assert!(
+        detail.starts_with("system 1 is heard from 127.0.0.1:"),
+        "{detail}"
+    );
+}
+
 #[test]
 fn two_vehicles_at_once_keep_their_own_decisions() {
     let ds = run_live(

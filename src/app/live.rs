@@ -52,6 +52,8 @@ pub struct LiveCounters {
     /// Our own alert frames (component `ALERT_COMPID`) that came back in, ignored: a forwarder
     /// such as MAVProxy sends what one link gives it to its other links.
     pub own_echo: u64,
+    /// System ids heard from two senders at once, not yet made decisions.
+    pub two_sources: Vec<(u8, String)>,
 }
 
 /// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
@@ -86,6 +88,12 @@ pub async fn run(
                 r = link.recv_or_note() => match r {
                     // (Under the dashboard, held until the terminal is restored.)
                     Ok(Received::Note(note)) => tracing::info!("monitor: {spec}: {note}"),
+                    Ok(Received::TwoSources { sysid, detail }) => {
+                        tracing::warn!("monitor: {spec}: {detail}");
+                        if let Ok(mut c) = reader_counters.lock() {
+                            c.two_sources.push((sysid, detail));
+                        }
+                    }
                     Ok(Received::Frame(frame)) => {
                         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
                             drops += 1;
@@ -172,9 +180,22 @@ pub async fn run(
                     .stream_over
                     .as_ref()
                     .is_some_and(|o| o.load(std::sync::atomic::Ordering::Relaxed));
+                let mixed = live_counters
+                    .lock()
+                    .map(|mut c| std::mem::take(&mut c.two_sources))
+                    .unwrap_or_default();
+                for (sysid, detail) in mixed {
+                    sink.decision(&link_event(monitor, sysid, Event::Contaminated, detail));
+                }
                 for (sysid, seen) in &last_seen {
-                    // Only vehicles the monitor knows (not every stray system id).
-                    if !monitor.assembler.vehicles.contains_key(sysid) {
+                    // Only vehicles that sent a sample: a stray system id's heartbeat (one
+                    // from each of 252 made 252 link_lost decisions) is no vehicle to lose.
+                    if monitor
+                        .assembler
+                        .vehicles
+                        .get(sysid)
+                        .is_none_or(|v| v.counters.samples == 0)
+                    {
                         continue;
                     }
                     let gone = now.duration_since(*seen) > opts.link_timeout;

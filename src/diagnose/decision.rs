@@ -184,6 +184,9 @@ pub enum Event {
     /// An actuator the calibrated model cannot judge (rule G2): said once, and no fault is
     /// decided on it.
     CannotJudge,
+    /// The vehicle's stream is mixed with another (its system id from two senders at once):
+    /// its estimates may be wrong. Said once per vehicle.
+    Contaminated,
 }
 
 impl Event {
@@ -209,6 +212,7 @@ impl Event {
             Self::Suspect => "suspect",
             Self::SuspectCleared => "suspect_cleared",
             Self::CannotJudge => "cannot_judge",
+            Self::Contaminated => "contaminated",
         }
     }
 }

@@ -38,6 +38,12 @@ pub(super) enum Read {
 pub enum Received {
     Frame(Frame),
     Note(String),
+    /// An autopilot's system id heard from a second address at the same time: two links to
+    /// one vehicle, or two vehicles with one id (said once per id).
+    TwoSources {
+        sysid: u8,
+        detail: String,
+    },
 }
 
 /// One live connection: receive frames, send encoded frames.
@@ -53,6 +59,7 @@ pub struct Link {
     datagram_from: Option<SocketAddr>,
     autopilot_from: std::collections::BTreeMap<u8, (SocketAddr, tokio::time::Instant)>,
     told_two_sources: std::collections::BTreeSet<u8>,
+    two_sources: std::collections::VecDeque<(u8, String)>,
 }
 
 /// Two senders of one autopilot's system id within this of each other are two streams at once
@@ -103,6 +110,7 @@ impl Link {
             datagram_from: None,
             autopilot_from: Default::default(),
             told_two_sources: Default::default(),
+            two_sources: Default::default(),
         })
     }
 
@@ -131,9 +139,12 @@ impl Link {
             && now.duration_since(at) < TWO_SOURCES_WITHIN
             && self.told_two_sources.insert(f.sysid)
         {
-            self.notes.push_back(format!(
-                "system {} is heard from {before} and from {from} at once: two links to one vehicle, or two vehicles with the same system id (its samples will count as reordered and duplicated)",
-                f.sysid
+            self.two_sources.push_back((
+                f.sysid,
+                format!(
+                    "system {} is heard from {before} and from {from} at once: two links to one vehicle, or two vehicles with the same system id (its samples will count as reordered and duplicated, its estimates may be wrong)",
+                    f.sysid
+                ),
             ));
         }
     }
@@ -176,6 +187,9 @@ impl Link {
         loop {
             if let Some(note) = self.notes.pop_front() {
                 return Ok(Received::Note(note));
+            }
+            if let Some((sysid, detail)) = self.two_sources.pop_front() {
+                return Ok(Received::TwoSources { sysid, detail });
             }
             if let Some(f) = self.framer.next_frame() {
                 self.note_source(&f);
@@ -444,17 +458,21 @@ mod tests {
             while frames < 12 {
                 match tokio::time::timeout(Duration::from_secs(5), link.recv_or_note()).await {
                     Ok(Ok(Received::Frame(_))) => frames += 1,
-                    Ok(Ok(Received::Note(n))) => notes.push(n),
+                    Ok(Ok(Received::TwoSources { sysid, detail })) => notes.push((sysid, detail)),
                     other => panic!("{other:?}"),
                 }
             }
-            if let Ok(Ok(Received::Note(n))) =
+            if let Ok(Ok(Received::TwoSources { sysid, detail })) =
                 tokio::time::timeout(Duration::from_millis(100), link.recv_or_note()).await
             {
-                notes.push(n);
+                notes.push((sysid, detail));
             }
             assert_eq!(notes.len(), 1, "{notes:?}");
-            assert!(notes[0].starts_with("system 1 is heard from"), "{notes:?}");
+            assert_eq!(notes[0].0, 1, "{notes:?}");
+            assert!(
+                notes[0].1.starts_with("system 1 is heard from"),
+                "{notes:?}"
+            );
         });
     }
 }

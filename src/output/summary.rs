@@ -61,6 +61,14 @@ pub fn render(
             c.non_finite,
             c.lost_frames
         );
+        if c.params_dropped > 0 {
+            let _ = writeln!(
+                s,
+                "  parameters: {} PARAM_VALUE of new names dropped past the {} kept",
+                c.params_dropped,
+                crate::telemetry::assembler::MAX_PARAMS
+            );
+        }
         if c.clock_jumps_refused > 0 {
             let _ = writeln!(
                 s,

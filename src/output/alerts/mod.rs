@@ -149,6 +149,11 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
         // Not a fault, but the planner should know the actuator is not monitored.
         Event::CannotJudge => (MavSeverity::MAV_SEVERITY_WARNING, fit("cannot judge", "")),
         Event::LinkLost | Event::LinkRestored => return None,
+        // The planner hears both senders itself; its operator should know ours is unsure.
+        Event::Contaminated => (
+            MavSeverity::MAV_SEVERITY_WARNING,
+            "AHC two senders of this id: estimates unsure".into(),
+        ),
     };
     Some((sev, cut_bytes(text.trim(), TEXT_BYTES).to_string()))
 }

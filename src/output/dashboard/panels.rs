@@ -353,6 +353,7 @@ pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], s
                     Style::default().fg(Color::Green)
                 }
                 Event::LinkLost
+                | Event::Contaminated
                 | Event::FilterReset
                 | Event::CannotEstimate
                 | Event::CannotJudge

@@ -33,6 +33,11 @@ const REBOOT_CONFIRM_S: f64 = 5.0;
 /// the next messages go back on is undone instead, see `clock_before_jump`.)
 pub const REBOOT_ARRIVAL_S: f64 = 0.25;
 
+/// Most parameters kept per vehicle (ArduPilot and PX4 have 1,000-1,500): a new name past
+/// these is dropped and counted, a known one still updated, so a flood of made-up names
+/// (300,000 grew the memory by 26 MB) neither grows the state nor displaces the real ones.
+pub const MAX_PARAMS: usize = 4096;
+
 /// One instant of one vehicle: what an estimator step needs, before normalisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TelemetrySample {
@@ -62,6 +67,8 @@ pub struct TelemetryCounters {
     pub duplicates: u64,
     /// Vehicle clock jumped back by more than a second (confirmed by a second message).
     pub reboots: u64,
+    /// PARAM_VALUE of new names past [`MAX_PARAMS`], dropped.
+    pub params_dropped: u64,
     /// Jumps of the vehicle clock refused: a new boot's whose messages did not arrive over
     /// [`REBOOT_ARRIVAL_S`] (each message that would have confirmed it, dropped), and jumps
     /// ahead undone by the next messages.
@@ -351,7 +358,11 @@ impl VehicleAssembler {
             MavMessage::PARAM_VALUE(p) => {
                 let name = p.param_id.to_str().unwrap_or("").trim_end_matches('\0');
                 if !name.is_empty() && p.param_value.is_finite() {
-                    self.info.params.insert(name.to_string(), p.param_value);
+                    if self.info.params.len() < MAX_PARAMS || self.info.params.contains_key(name) {
+                        self.info.params.insert(name.to_string(), p.param_value);
+                    } else {
+                        self.counters.params_dropped += 1;
+                    }
                 }
                 None
             }

@@ -541,3 +541,28 @@ fn a_jump_ahead_the_next_messages_go_back_on_is_undone() {
     let v = &a.vehicles[&1];
     assert_eq!((v.counters.reboots, v.counters.clock_jumps_refused), (0, 1));
 }
+
+/// 300,000 PARAM_VALUEs of made-up names keep at most `MAX_PARAMS` (the first, real ones
+/// among them, still updated), the rest counted.
+#[test]
+fn parameters_are_capped_and_the_excess_counted() {
+    use crate::protocol::dialects::ahcmon::PARAM_VALUE_DATA;
+    let param = |name: &str, value: f32| {
+        let mut id = [0u8; 16];
+        id[..name.len()].copy_from_slice(name.as_bytes());
+        MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+            param_id: id.into(),
+            param_value: value,
+            ..Default::default()
+        })
+    };
+    let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+    feed(&mut a, &[param("FRAME_CLASS", 1.0)]);
+    for k in 0..300_000 {
+        feed(&mut a, &[param(&format!("X{k}"), 1.0)]);
+    }
+    feed(&mut a, &[param("FRAME_CLASS", 2.0)]);
+    assert_eq!(a.info.params.len(), MAX_PARAMS);
+    assert_eq!(a.counters.params_dropped, 300_001 - MAX_PARAMS as u64);
+    assert_eq!(a.info.param("FRAME_CLASS"), Some(2.0));
+}
