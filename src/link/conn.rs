@@ -349,6 +349,69 @@ mod tests {
         });
     }
 
+    /// An idle client that connected to `tcpin` first no longer keeps the vehicle out: once
+    /// it has been silent for `TCPIN_IDLE`, the next client takes over and its frames are
+    /// read; a second client while the first is sending is refused.
+    #[test]
+    fn tcpin_gives_an_idle_client_s_place_to_the_next() {
+        use crate::protocol::dialects::ahcmon::{
+            HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType,
+        };
+        use tokio::io::AsyncWriteExt;
+        runtime().block_on(async {
+            let spec: ConnSpec = "tcpin:127.0.0.1:0".parse().expect("spec");
+            let mut server = Link::open(spec).await.expect("listens");
+            let addr = server.local_addr().expect("addr");
+            let idle = TcpStream::connect(addr).await.expect("connect");
+            let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_QUADROTOR,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_STANDBY,
+                mavlink_version: 3,
+            });
+            let mut frame = Vec::new();
+            crate::protocol::frame::encode_v2(7, 1, 0, &hb, &mut frame);
+            let vehicle = tokio::spawn(async move {
+                tokio::time::sleep(crate::link::tcp::TCPIN_IDLE + Duration::from_millis(300)).await;
+                let mut v = TcpStream::connect(addr).await.expect("connect");
+                for _ in 0..20 {
+                    v.write_all(&frame).await.expect("write");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+                v
+            });
+            let mut notes = vec![];
+            let got = tokio::time::timeout(Duration::from_secs(10), async {
+                loop {
+                    match server.recv_or_note().await.expect("recv") {
+                        Received::Frame(f) => return f,
+                        Received::Note(n) => notes.push(n),
+                        Received::TwoSources { .. } => {}
+                    }
+                }
+            })
+            .await
+            .expect("the vehicle's frames never came past the idle client");
+            assert_eq!(got.sysid, 7);
+            assert!(notes.iter().any(|n| n.contains("silent for")), "{notes:?}");
+            // A third client while the vehicle sends: refused, the vehicle read on.
+            let _third = TcpStream::connect(addr).await.expect("connect");
+            let mut refused = false;
+            for _ in 0..10 {
+                match tokio::time::timeout(Duration::from_secs(2), server.recv_or_note()).await {
+                    Ok(Ok(Received::Note(n))) if n.contains("was refused") => refused = true,
+                    Ok(Ok(Received::Frame(f))) => assert_eq!(f.sysid, 7),
+                    _ => {}
+                }
+            }
+            assert!(refused);
+            drop(idle);
+            let _ = vehicle.await;
+        });
+    }
+
     #[test]
     fn tcp_senders_never_wait_for_their_peer() {
         runtime().block_on(async {

@@ -1,4 +1,5 @@
-//! TCP: `tcpin` accepts one client at a time, `tcpout` connects and reconnects every second.
+//! TCP: `tcpin` reads one client at a time (a new one takes over from one silent for
+//! [`TCPIN_IDLE`]), `tcpout` connects and reconnects every second.
 //! A sender never waits for its peer: the monitor's loop (estimators, decisions, ctrl-c) must
 //! go on while no planner is there; frames until then are not sent.
 
@@ -15,9 +16,15 @@ const SEND_CONNECT_TIMEOUT: Duration = Duration::from_millis(100);
 /// How long a send may wait for room in a TCP peer's buffer.
 const SEND_WRITE_TIMEOUT: Duration = Duration::from_millis(100);
 
+/// A `tcpin` client that has sent nothing for this long gives way to a new one: an idle
+/// client that connected first used to keep the vehicle out for good.
+pub const TCPIN_IDLE: Duration = Duration::from_secs(2);
+
 pub(super) struct TcpIn {
     listener: TcpListener,
     stream: Option<TcpStream>,
+    /// When the connected client last sent bytes (or connected).
+    last_bytes: tokio::time::Instant,
 }
 
 pub(super) struct TcpOut {
@@ -73,6 +80,7 @@ impl TcpIn {
         Ok(Self {
             listener: TcpListener::bind(addr).await?,
             stream: None,
+            last_bytes: tokio::time::Instant::now(),
         })
     }
 
@@ -86,11 +94,43 @@ impl TcpIn {
         notes: &mut VecDeque<String>,
     ) -> std::io::Result<Read> {
         let lost = || "the client disconnected; waiting for another".to_string();
-        if let Some(read) = read_stream(&mut self.stream, buf, notes, lost).await {
-            return Ok(read);
+        let Self {
+            listener,
+            stream,
+            last_bytes,
+        } = self;
+        if stream.is_some() {
+            // Both futures are cancel-safe: a read or an accept that loses the race is lost
+            // to neither.
+            tokio::select! {
+                read = read_stream(stream, buf, notes, lost) => {
+                    if let Some(Read::Bytes(_)) = read {
+                        *last_bytes = tokio::time::Instant::now();
+                    }
+                    return Ok(read.unwrap_or(Read::Nothing));
+                }
+                accepted = listener.accept() => {
+                    let (s, from) = accepted?;
+                    let silent = last_bytes.elapsed();
+                    if silent >= TCPIN_IDLE {
+                        *stream = Some(s);
+                        *last_bytes = tokio::time::Instant::now();
+                        notes.push_back(format!(
+                            "a client connected from {from}; the previous one, silent for {:.1} s, was dropped",
+                            silent.as_secs_f64()
+                        ));
+                    } else {
+                        notes.push_back(format!(
+                            "a second client from {from} was refused: one client at a time, and the connected one is sending"
+                        ));
+                    }
+                    return Ok(Read::Nothing);
+                }
+            }
         }
-        let (s, from) = self.listener.accept().await?;
-        self.stream = Some(s);
+        let (s, from) = listener.accept().await?;
+        *stream = Some(s);
+        *last_bytes = tokio::time::Instant::now();
         notes.push_back(format!("a client connected from {from}"));
         Ok(Read::Nothing)
     }
@@ -108,6 +148,7 @@ impl TcpIn {
             match polled {
                 std::task::Poll::Ready(Ok((s, from))) => {
                     self.stream = Some(s);
+                    self.last_bytes = tokio::time::Instant::now();
                     notes.push_back(format!("a client connected from {from}"));
                 }
                 std::task::Poll::Ready(Err(e)) => return Err(e),
