@@ -309,6 +309,12 @@ pub struct RunArgs {
         conflicts_with = "calibrate_until"
     )]
     pub calibrate_s: f64,
+    /// Verify MAVLink 2 signatures with the secret key in FILE (32 raw bytes, 64 hexadecimal
+    /// digits, or a one-line passphrase hashed as MAVProxy's `signing setup` does): frames
+    /// not signed with it, or replayed, are dropped and counted. Without it signed frames are
+    /// read unchecked. A file, so that the key is never on a command line.
+    #[arg(long, value_name = "FILE")]
+    pub signing_key_file: Option<PathBuf>,
 }
 
 /// The JSON-lines files of a run (`replay`, `monitor`, `demo`, `sim`, `eval`).

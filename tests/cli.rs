@@ -1743,3 +1743,80 @@ fn a_second_fault_is_identified_by_the_filter_with_the_first_in_force() {
         assert!(d.abs() < 0.1, "{servo} delta {d}: {last}");
     }
 }
+
+/// MAVLink 2 signing against pymavlink's: a simulated quad's tlog re-signed by pymavlink
+/// (tests/reference/sign_tlog.py), with a forged ATTITUDE signed with another key and an
+/// unsigned one in the middle. With `--signing-key-file` the vehicle is accepted, both forged
+/// frames are dropped and counted, and the decisions are the unsigned log's; without a key
+/// signed frames are read unchecked; with the wrong key nothing passes, said as such (exit 2).
+#[test]
+fn signed_stream_accepted_and_forged_frames_dropped_with_the_key() {
+    let dir = common::temp_dir("cli_signing");
+    let plain = dir.join("plain.tlog");
+    sim_tlog("quad-x-motor2-loe", &plain, &[]);
+    let signed = dir.join("signed.tlog");
+    let key_hex = "a1".repeat(32);
+    let out = Command::new(common::python())
+        .arg("tests/reference/sign_tlog.py")
+        .args([plain.to_str().unwrap(), signed.to_str().unwrap(), &key_hex])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let made: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (made["forged"].as_u64(), made["unsigned"].as_u64()),
+        (Some(1), Some(1))
+    );
+    let key = dir.join("key.hex");
+    std::fs::write(&key, format!("{key_hex}\n")).unwrap();
+    let replay = |log: &std::path::Path, key: Option<&std::path::Path>, name: &str| {
+        let dec = dir.join(name);
+        let mut args = vec![
+            "replay".to_string(),
+            log.to_str().unwrap().into(),
+            "--headless".into(),
+            "--decisions".into(),
+            dec.to_str().unwrap().into(),
+        ];
+        if let Some(k) = key {
+            args.extend(["--signing-key-file".into(), k.to_str().unwrap().into()]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (code, out, err) = ahcmon(&args);
+        (
+            code,
+            out,
+            err,
+            std::fs::read_to_string(&dec).unwrap_or_default(),
+        )
+    };
+    let (code, _, err, plain_decisions) = replay(&plain, None, "d_plain.jsonl");
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err, signed_decisions) = replay(&signed, Some(&key), "d_signed.jsonl");
+    assert_eq!(code, 0, "{err}");
+    let link = out.lines().find(|l| l.starts_with("link: ")).unwrap();
+    let frames = made["written"].as_u64().unwrap();
+    assert!(
+        link.contains(&format!("frames {frames} "))
+            && link.contains("unsigned 1 · bad_signature 1"),
+        "{link}"
+    );
+    assert!(!plain_decisions.is_empty());
+    assert_eq!(signed_decisions, plain_decisions);
+    // No key: signed frames are read unchecked, the forged two with them.
+    let (code, out, err, _) = replay(&signed, None, "d_nokey.jsonl");
+    assert_eq!(code, 0, "{err}");
+    let link = out.lines().find(|l| l.starts_with("link: ")).unwrap();
+    assert!(link.contains(&format!("frames {} ", frames + 2)), "{link}");
+    // Another key: nothing passes, and that is what the error says.
+    let wrong = dir.join("wrong.key");
+    std::fs::write(&wrong, "another passphrase\n").unwrap();
+    let (code, _, err, _) = replay(&signed, Some(&wrong), "d_wrong.jsonl");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("passed the signature check"), "{err}");
+}

@@ -74,6 +74,20 @@ impl RunArgs {
         })
     }
 
+    /// The signature check `--signing-key-file` asks for.
+    pub fn signing(&self) -> anyhow::Result<Option<ahcmon::protocol::signing::Signing>> {
+        let Some(path) = &self.signing_key_file else {
+            return Ok(None);
+        };
+        let bytes = std::fs::read(path).map_err(|source| InputFileError {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let key = ahcmon::protocol::signing::Signing::key_from_file_contents(&bytes)
+            .map_err(|e| UsageError(format!("--signing-key-file {}: {e}", path.display())))?;
+        Ok(Some(ahcmon::protocol::signing::Signing::new(key)))
+    }
+
     /// The JSON-lines files, created only once no output names an input or another output.
     pub fn files(
         &self,

@@ -71,6 +71,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         output,
         calibrate_until: None,
         calibrate_s: ahcmon::pipeline::PipelineConfig::default().calibrate_s,
+        signing_key_file: None,
     };
     // Headless, the monitor stops once the simulated flight has ended; with the
     // dashboard the operator looks on until q.
@@ -150,13 +151,17 @@ fn monitor(
         ..Default::default()
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
+    let signing = args.signing()?;
     let mut files = args.files(&[], &[])?;
     if alerts.is_some() {
         files.alerts = Some(ahcmon::output::alerts::Alerts::default());
     }
     let rt = runtime()?;
     let result = rt.block_on(async {
-        let link = Link::open(spec.clone()).await?;
+        let mut link = Link::open(spec.clone()).await?;
+        if let Some(s) = signing {
+            link.set_signing(s);
+        }
         let local = link.local_addr();
         let verb = match spec {
             ConnSpec::UdpIn(_) | ConnSpec::TcpIn(_) => "listening on",

@@ -48,6 +48,7 @@ fn replay(
         return replay_own_log(file, format, size, args, plot);
     }
     let mut reader = TlogReader::open(file).map_err(input_error)?;
+    reader.signing = args.signing()?;
     let mut monitor = Monitor::new(args.pipeline_config()?);
     let mut files = args.files(&[file], &[("--plot", plot)])?;
     if let Some(p) = plot {
@@ -158,6 +159,7 @@ fn replay(
     // Not a telemetry log at all: no frame of a message it knows, whose checksum held (a
     // frame of an unknown id has no checksum to check; random bytes make some). Its output
     // files stay as they were.
+    let refused = reader.counters.unsigned + reader.counters.bad_signature;
     let not_a_log = reader.counters.frames == 0;
     if !not_a_log {
         files.finish();
@@ -181,6 +183,13 @@ fn replay(
     );
     write_error.map_or(Ok(()), Err)?;
     // An input error, so a script can tell.
+    if not_a_log && refused > 0 {
+        return Err(UsageError(format!(
+            "{}: none of its {refused} frames passed the signature check (not signed, or signed with another key than --signing-key-file's); the output files are left as they were",
+            file.display()
+        ))
+        .into());
+    }
     if not_a_log {
         return Err(UsageError(format!(
             "{}: no MAVLink frame of a known message in its {size} bytes; is it a telemetry log (.tlog)? (the output files are left as they were)",
@@ -201,6 +210,14 @@ fn replay_own_log(
     plot: Option<&std::path::Path>,
 ) -> anyhow::Result<()> {
     let mut monitor = Monitor::new(args.pipeline_config()?);
+    if args.signing_key_file.is_some() {
+        return Err(UsageError(format!(
+            "--signing-key-file: {} is a {}, which is not MAVLink and has no signatures",
+            file.display(),
+            format.name()
+        ))
+        .into());
+    }
     let mut files = args.files(&[file], &[("--plot", plot)])?;
     if let Some(p) = plot {
         ahcmon::output::jsonl::OutputFile::open(p)

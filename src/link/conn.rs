@@ -114,6 +114,11 @@ impl Link {
         })
     }
 
+    /// Only frames signed with this key pass (`protocol::signing`).
+    pub fn set_signing(&mut self, signing: crate::protocol::signing::Signing) {
+        self.framer.signing = Some(signing);
+    }
+
     /// Times an outgoing TCP connection was re-established (0 for every other link).
     pub fn reconnects(&self) -> u64 {
         match &self.transport {

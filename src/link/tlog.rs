@@ -36,6 +36,8 @@ pub struct TlogReader<R: Read> {
     /// Bytes dropped from the front of `buf` so far (for progress).
     base: u64,
     pub counters: FrameCounters,
+    /// With a key, only frames signed with it pass (`protocol::signing`).
+    pub signing: Option<crate::protocol::signing::Signing>,
 }
 
 impl TlogReader<File> {
@@ -57,6 +59,7 @@ impl<R: Read> TlogReader<R> {
             ts_candidate: None,
             base: 0,
             counters: FrameCounters::default(),
+            signing: None,
         }
     }
 
@@ -166,11 +169,15 @@ impl<R: Read> TlogReader<R> {
             let ts = u64::from_be_bytes(rec[..8].try_into().unwrap_or([0; 8]));
             match parse(&rec[8..]) {
                 Parsed::Frame(f, n) => {
+                    let verdict = self.signing.as_mut().map(|s| s.check(&rec[8..8 + n]));
                     self.pos += 8 + n;
                     self.syncing = false;
                     self.tail_cut = false;
-                    self.counters.frames += 1;
+                    if crate::protocol::frame::count_unsigned(&mut self.counters, verdict) {
+                        continue;
+                    }
                     let ts = self.checked_ts(ts);
+                    self.counters.frames += 1;
                     return Ok(Some((ts, *f)));
                 }
                 Parsed::UnknownId(n) => {

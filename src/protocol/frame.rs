@@ -45,11 +45,26 @@ pub struct FrameCounters {
     /// Tlogs: good frames whose timestamp was implausible (a day or more off the log's clock)
     /// and was replaced by the clock's.
     pub repaired_ts: u64,
+    /// With a signing key: good frames not signed, and signed but not with the key (or
+    /// replayed: a timestamp not newer than its stream's last). Dropped.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub unsigned: u64,
+    #[serde(skip_serializing_if = "is_zero")]
+    pub bad_signature: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 impl FrameCounters {
     pub fn dropped(&self) -> u64 {
-        self.bad_crc + self.unknown_id + self.parse_error + self.truncated
+        self.bad_crc
+            + self.unknown_id
+            + self.parse_error
+            + self.truncated
+            + self.unsigned
+            + self.bad_signature
     }
 
     pub fn add(&mut self, o: &FrameCounters) {
@@ -61,6 +76,8 @@ impl FrameCounters {
         self.parse_error += o.parse_error;
         self.truncated += o.truncated;
         self.repaired_ts += o.repaired_ts;
+        self.unsigned += o.unsigned;
+        self.bad_signature += o.bad_signature;
     }
 }
 
@@ -81,6 +98,13 @@ impl std::fmt::Display for FrameCounters {
         )?;
         if self.repaired_ts > 0 {
             write!(f, " · repaired timestamps {}", self.repaired_ts)?;
+        }
+        if self.unsigned + self.bad_signature > 0 {
+            write!(
+                f,
+                " · unsigned {} · bad_signature {} (dropped: not signed with the key, or replayed)",
+                self.unsigned, self.bad_signature
+            )?;
         }
         Ok(())
     }
@@ -197,12 +221,33 @@ pub fn encode_v2(sysid: u8, compid: u8, seq: u8, msg: &MavMessage, out: &mut Vec
     let _ = mavlink_core::write_v2_msg(out, header, msg);
 }
 
+/// Count a frame the signing check refused; true when refused (`None`: no key, all pass).
+pub fn count_unsigned(
+    counters: &mut FrameCounters,
+    verdict: Option<super::signing::Verdict>,
+) -> bool {
+    use super::signing::Verdict;
+    match verdict {
+        None | Some(Verdict::Signed) => false,
+        Some(Verdict::Unsigned) => {
+            counters.unsigned += 1;
+            true
+        }
+        Some(Verdict::BadSignature | Verdict::Replayed) => {
+            counters.bad_signature += 1;
+            true
+        }
+    }
+}
+
 /// A byte-stream framer for live links (UDP datagrams, TCP, serial): no timestamps.
 #[derive(Debug, Default)]
 pub struct StreamFramer {
     buf: Vec<u8>,
     syncing: bool,
     pub counters: FrameCounters,
+    /// With a key, only frames signed with it pass ([`super::signing`]).
+    pub signing: Option<super::signing::Signing>,
 }
 
 impl StreamFramer {
@@ -217,8 +262,15 @@ impl StreamFramer {
         while pos < self.buf.len() {
             match parse(&self.buf[pos..]) {
                 Parsed::Frame(f, n) => {
+                    let verdict = self
+                        .signing
+                        .as_mut()
+                        .map(|s| s.check(&self.buf[pos..pos + n]));
                     pos += n;
                     self.syncing = false;
+                    if count_unsigned(&mut self.counters, verdict) {
+                        continue;
+                    }
                     self.counters.frames += 1;
                     out = Some(*f);
                     break;

@@ -10,6 +10,7 @@ pub mod dialects {
 }
 
 pub mod frame;
+pub mod signing;
 
 pub use dialects::ahcmon::MavMessage;
 pub use frame::{Frame, FrameCounters};
