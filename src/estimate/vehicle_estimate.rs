@@ -57,11 +57,14 @@ pub(super) fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
     let (gamma_lo, gamma_hi) = f.bounds(gi);
     let (delta_lo, delta_hi) = f.bounds(di);
     let q = f.process_noise();
+    // The MIT-ESMF's outer ellipsoid can have its centre outside the a priori box its bounds
+    // are clipped to: the estimate is the set's point nearest it (the truth is in the box).
+    let inside = |v: f64, lo: f64, hi: f64| if lo <= hi { v.clamp(lo, hi) } else { v };
     AhcEstimate {
-        gamma: x[gi],
+        gamma: inside(x[gi], gamma_lo, gamma_hi),
         gamma_lo,
         gamma_hi,
-        delta: x[di],
+        delta: inside(x[di], delta_lo, delta_hi),
         delta_lo,
         delta_hi,
         block: [p[(gi, gi)], p[(gi, di)], p[(di, di)]],
