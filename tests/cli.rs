@@ -1756,18 +1756,13 @@ fn signed_stream_accepted_and_forged_frames_dropped_with_the_key() {
     sim_tlog("quad-x-motor2-loe", &plain, &[]);
     let signed = dir.join("signed.tlog");
     let key_hex = "a1".repeat(32);
-    let out = Command::new(common::python())
-        .arg("tests/reference/sign_tlog.py")
-        .args([plain.to_str().unwrap(), signed.to_str().unwrap(), &key_hex])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let made: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let out = common::run_python(&[
+        "tests/reference/sign_tlog.py",
+        plain.to_str().unwrap(),
+        signed.to_str().unwrap(),
+        &key_hex,
+    ]);
+    let made: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(
         (made["forged"].as_u64(), made["unsigned"].as_u64()),
         (Some(1), Some(1))

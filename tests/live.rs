@@ -59,26 +59,33 @@ fn faults(ds: &[Value], sysid: u64) -> Vec<&Value> {
         .collect()
 }
 
-/// Monitor on udpin, one or more simulators on udpout at 10x real time, all as processes.
-fn run_live(sims: &[(&str, u8)], name: &str) -> Vec<Value> {
-    let dir = common::temp_dir(name);
-    let dec = dir.join("decisions.jsonl");
-    let port = free_udp_port();
+/// `ahcmon monitor` on udpin at `port`, headless, its decisions into `dec`, ending `idle_s`
+/// after the last frame; returned once it has had time to start listening.
+fn headless_monitor(port: u16, dec: &Path, idle_s: u32) -> std::process::Child {
     let monitor = Command::new(bin())
         .args([
             "monitor",
             &format!("udpin:127.0.0.1:{port}"),
             "--headless",
             "--exit-idle",
-            "2",
+            &idle_s.to_string(),
         ])
         .arg("--decisions")
-        .arg(&dec)
+        .arg(dec)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(500));
+    monitor
+}
+
+/// Monitor on udpin, one or more simulators on udpout at 10x real time, all as processes.
+fn run_live(sims: &[(&str, u8)], name: &str) -> Vec<Value> {
+    let dir = common::temp_dir(name);
+    let dec = dir.join("decisions.jsonl");
+    let port = free_udp_port();
+    let monitor = headless_monitor(port, &dec, 2);
     let handles: Vec<_> = sims
         .iter()
         .map(|(scenario, sysid)| {
@@ -136,21 +143,7 @@ fn two_forged_frames_during_a_live_flight_change_no_decision() {
     let dir = common::temp_dir("live_forged");
     let dec = dir.join("decisions.jsonl");
     let port = free_udp_port();
-    let monitor = Command::new(bin())
-        .args([
-            "monitor",
-            &format!("udpin:127.0.0.1:{port}"),
-            "--headless",
-            "--exit-idle",
-            "2",
-        ])
-        .arg("--decisions")
-        .arg(&dec)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(500));
+    let monitor = headless_monitor(port, &dec, 2);
     let sim = Command::new(bin())
         .args([
             "sim",
@@ -208,21 +201,7 @@ fn stray_system_ids_make_no_decisions() {
     let dir = common::temp_dir("live_stray");
     let dec = dir.join("decisions.jsonl");
     let port = free_udp_port();
-    let monitor = Command::new(bin())
-        .args([
-            "monitor",
-            &format!("udpin:127.0.0.1:{port}"),
-            "--headless",
-            "--exit-idle",
-            "3",
-        ])
-        .arg("--decisions")
-        .arg(&dec)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(500));
+    let monitor = headless_monitor(port, &dec, 3);
     let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: 0,

@@ -461,6 +461,22 @@ fn feed_at(a: &mut Assembler, arrival: f64, msgs: &[MavMessage]) -> Vec<Telemetr
     out
 }
 
+/// Two seconds of a 50 Hz flight at 600 s of uptime, with two ATTITUDEs stamped `forged` (ms)
+/// arriving back to back after its 51st instant; the samples that came out.
+fn flight_with_forged_pair(a: &mut Assembler, forged: [u32; 2]) -> usize {
+    let mut samples = 0;
+    for k in 0..100u32 {
+        let ms = 600_000 + 20 * k;
+        let at = f64::from(k) * 0.02;
+        samples += feed_at(a, at, &[attitude(ms), outputs(ms, 1500)]).len();
+        if k == 50 {
+            feed_at(a, at + 0.0005, &[attitude(forged[0])]);
+            feed_at(a, at + 0.0006, &[attitude(forged[1])]);
+        }
+    }
+    samples
+}
+
 /// Two forged ATTITUDEs sent back to back (stamped 1.0 and 1.6 s) during a flight at 600 s
 /// used to confirm a reboot (the filters reset, the calibration restarted and a real fault was
 /// missed). Arriving within a millisecond they do not cover `REBOOT_ARRIVAL_S` of arrival
@@ -469,16 +485,7 @@ fn feed_at(a: &mut Assembler, arrival: f64, msgs: &[MavMessage]) -> Vec<Telemetr
 #[test]
 fn two_forged_frames_do_not_make_a_reboot_but_a_real_one_does() {
     let mut a = Assembler::new(AssemblerConfig::default());
-    let mut samples = 0;
-    for k in 0..100u32 {
-        let ms = 600_000 + 20 * k;
-        let at = f64::from(k) * 0.02;
-        samples += feed_at(&mut a, at, &[attitude(ms), outputs(ms, 1500)]).len();
-        if k == 50 {
-            feed_at(&mut a, at + 0.0005, &[attitude(1000)]);
-            feed_at(&mut a, at + 0.0006, &[attitude(1600)]);
-        }
-    }
+    let samples = flight_with_forged_pair(&mut a, [1000, 1600]);
     let v = &a.vehicles[&1];
     assert!(!v.rebooted);
     assert_eq!(v.counters.reboots, 0);
@@ -510,16 +517,7 @@ fn two_forged_frames_do_not_make_a_reboot_but_a_real_one_does() {
 #[test]
 fn a_jump_ahead_the_next_messages_go_back_on_is_undone() {
     let mut a = Assembler::new(AssemblerConfig::default());
-    let mut samples = 0;
-    for k in 0..100u32 {
-        let ms = 600_000 + 20 * k;
-        let at = f64::from(k) * 0.02;
-        samples += feed_at(&mut a, at, &[attitude(ms), outputs(ms, 1500)]).len();
-        if k == 50 {
-            feed_at(&mut a, at + 0.0005, &[attitude(700_000)]);
-            feed_at(&mut a, at + 0.0006, &[attitude(700_020)]);
-        }
-    }
+    let samples = flight_with_forged_pair(&mut a, [700_000, 700_020]);
     let v = &a.vehicles[&1];
     assert_eq!(samples, 100);
     assert_eq!((v.counters.reboots, v.counters.clock_jumps_refused), (0, 1));
