@@ -12,7 +12,18 @@ pub struct Monitor {
     samples: Vec<crate::telemetry::TelemetrySample>,
     pub pipelines: BTreeMap<u8, VehiclePipeline>,
     cfg: PipelineConfig,
+    /// Per vehicle: the counts at the start of the current window of messages, and whether
+    /// its stream was said to be mixed ([`MIXED_SHARE`]).
+    mixing: BTreeMap<u8, ([u64; 2], bool)>,
 }
+
+/// A vehicle stream in which, over a window of [`MIXED_WINDOW`] rate instants (samples and
+/// those dropped), at least this share were duplicates or went back in time is a mixed one
+/// (two links of one vehicle, a link that replays, two vehicles with one id): said once as a
+/// `contaminated` decision. A healthy link has none (a lost or reordered radio packet is
+/// rarer than one in a hundred).
+pub const MIXED_SHARE: f64 = 0.1;
+pub const MIXED_WINDOW: u64 = 500;
 
 impl Monitor {
     pub fn new(cfg: PipelineConfig) -> Self {
@@ -21,7 +32,15 @@ impl Monitor {
             samples: Vec::with_capacity(4),
             pipelines: BTreeMap::new(),
             cfg,
+            mixing: BTreeMap::new(),
         }
+    }
+
+    /// Record that vehicle `sysid`'s stream was said to be mixed (by the link, which saw two
+    /// senders); true the first time. One `contaminated` decision per vehicle.
+    pub fn mark_mixed(&mut self, sysid: u8) -> bool {
+        let (_, told) = self.mixing.entry(sysid).or_insert(([0; 2], false));
+        !std::mem::replace(told, true)
     }
 
     pub fn on_frame(&mut self, frame: &Frame, sink: &mut dyn Sink) {
@@ -89,6 +108,26 @@ impl Monitor {
                 pipeline.reset(sample.t, sink);
             }
             pipeline.on_sample(sample, &vehicle.info, sink);
+        }
+        let c = &vehicle.counters;
+        let bad = c.out_of_order + c.duplicates;
+        let now = [c.samples + bad, bad];
+        let (start, told) = self.mixing.entry(sysid).or_insert((now, false));
+        let (seen, mixed) = (now[0] - start[0], now[1] - start[1]);
+        if seen >= MIXED_WINDOW {
+            if !*told && mixed as f64 >= MIXED_SHARE * seen as f64 {
+                *told = true;
+                let t = self.samples.last().map_or(0.0, |s| s.t);
+                sink.decision(&crate::diagnose::vehicle::Decision::monitor(
+                    t,
+                    sysid,
+                    crate::diagnose::vehicle::Event::Contaminated,
+                    format!(
+                        "{mixed} of the last {seen} rate instants were duplicates or went back in time: two streams of this vehicle mixed (two links, a link that replays, two vehicles with one id); its estimates may be wrong"
+                    ),
+                ));
+            }
+            *start = now;
         }
     }
 }

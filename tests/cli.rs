@@ -1815,3 +1815,54 @@ fn signed_stream_accepted_and_forged_frames_dropped_with_the_key() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("passed the signature check"), "{err}");
 }
+
+/// One vehicle's stream recorded twice, the second copy 2 s late (a second link that lags):
+/// a tenth or more of its rate instants go back in time or repeat, and the replay says so once
+/// as a `contaminated` decision. The log as flown has none.
+#[test]
+fn a_stream_mixed_with_a_late_copy_is_a_contaminated_decision() {
+    let dir = common::temp_dir("cli_mixed");
+    let log = dir.join("quad.tlog");
+    sim_tlog("quad-x-healthy-gusts", &log, &[]);
+    let bytes = std::fs::read(&log).unwrap();
+    let records = tlog_records(&bytes);
+    // Each record, and the record of about 2 s (100 ATTITUDE instants of 6-8 frames) before.
+    let lag = 700;
+    let mut mixed = Vec::with_capacity(2 * bytes.len());
+    for (k, (range, _)) in records.iter().enumerate() {
+        mixed.extend_from_slice(&bytes[range.clone()]);
+        if k >= lag {
+            let late = &records[k - lag].0;
+            // Stamped with the receive time of now.
+            mixed.extend_from_slice(&bytes[range.start..range.start + 8]);
+            mixed.extend_from_slice(&bytes[late.start + 8..late.end]);
+        }
+    }
+    let mixed_log = dir.join("mixed.tlog");
+    std::fs::write(&mixed_log, mixed).unwrap();
+    let decisions = |log: &std::path::Path| -> Vec<serde_json::Value> {
+        let dec = log.with_extension("jsonl");
+        let (code, _, err) = ahcmon(&[
+            "replay",
+            log.to_str().unwrap(),
+            "--headless",
+            "--decisions",
+            dec.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        std::fs::read_to_string(&dec)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .filter(|d: &serde_json::Value| d["event"] == "contaminated")
+            .collect()
+    };
+    assert!(decisions(&log).is_empty());
+    let said = decisions(&mixed_log);
+    assert_eq!(said.len(), 1, "{said:?}");
+    let detail = said[0]["detail"].as_str().unwrap();
+    assert!(
+        detail.contains("duplicates or went back in time"),
+        "{detail}"
+    );
+}

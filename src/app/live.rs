@@ -185,7 +185,9 @@ pub async fn run(
                     .map(|mut c| std::mem::take(&mut c.two_sources))
                     .unwrap_or_default();
                 for (sysid, detail) in mixed {
-                    sink.decision(&link_event(monitor, sysid, Event::Contaminated, detail));
+                    if monitor.mark_mixed(sysid) {
+                        sink.decision(&link_event(monitor, sysid, Event::Contaminated, detail));
+                    }
                 }
                 for (sysid, seen) in &last_seen {
                     // Only vehicles that sent a sample: a stray system id's heartbeat (one
