@@ -80,6 +80,18 @@ fn headless_monitor(port: u16, dec: &Path, idle_s: u32) -> std::process::Child {
     monitor
 }
 
+/// Wait for a monitor started by [`headless_monitor`] to end by itself; it must succeed. Its
+/// summary (stdout).
+fn finished_monitor(monitor: std::process::Child) -> String {
+    let out = monitor.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "monitor failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
 /// Monitor on udpin, one or more simulators on udpout at 10x real time, all as processes.
 fn run_live(sims: &[(&str, u8)], name: &str) -> Vec<Value> {
     let dir = common::temp_dir(name);
@@ -103,13 +115,7 @@ fn run_live(sims: &[(&str, u8)], name: &str) -> Vec<Value> {
         let out = h.wait_with_output().unwrap();
         assert!(out.status.success());
     }
-    let out = monitor.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "monitor failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary = String::from_utf8_lossy(&out.stdout);
+    let summary = finished_monitor(monitor);
     assert!(summary.contains("bad_crc 0"), "{summary}");
     decisions(&dec)
 }
@@ -170,13 +176,7 @@ fn two_forged_frames_during_a_live_flight_change_no_decision() {
         forger.send_to(&frame, ("127.0.0.1", port)).unwrap();
     }
     assert!(sim.wait_with_output().unwrap().status.success());
-    let out = monitor.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary = String::from_utf8_lossy(&out.stdout);
+    let summary = finished_monitor(monitor);
     assert!(
         summary.contains("clock: 1 jumps of the vehicle clock"),
         "the forged pair was not seen and refused: {summary}"
@@ -216,12 +216,7 @@ fn stray_system_ids_make_no_decisions() {
         ahcmon::protocol::frame::encode_v2(sysid, 1, 0, &msg, &mut frame);
         sender.send_to(&frame, ("127.0.0.1", port)).unwrap();
     }
-    let out = monitor.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    finished_monitor(monitor);
     let ds = decisions(&dec);
     assert!(ds.is_empty(), "{} decisions: {:?}", ds.len(), ds.first());
 }
