@@ -6,6 +6,8 @@
 pub mod diagnose;
 pub mod estimate;
 pub mod eval;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod link;
 pub mod model;
 pub mod monitor;

@@ -58,7 +58,7 @@ pub fn find(
     }
     let path = Path::new(name_or_path);
     if path.exists() || name_or_path.ends_with(".toml") || name_or_path.contains('/') {
-        let text = std::fs::read_to_string(path).map_err(|reason| TomlFileError::Io {
+        let text = read_capped(path).map_err(|reason| TomlFileError::Io {
             path: name_or_path.to_string(),
             reason,
         })?;
@@ -80,6 +80,28 @@ pub fn find(
             .collect::<Vec<_>>()
             .join(", "),
     })
+}
+
+/// The largest TOML file read: a profile or scenario is a few kilobytes, and a path to a
+/// device or pipe that never ends (`/dev/zero`) must not be read until memory runs out.
+pub const MAX_TOML_BYTES: u64 = 1 << 20;
+
+fn read_capped(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open(path)?
+        .take(MAX_TOML_BYTES + 1)
+        .read_to_string(&mut text)?;
+    if text.len() as u64 > MAX_TOML_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "over {} KiB: not a profile or scenario",
+                MAX_TOML_BYTES >> 10
+            ),
+        ));
+    }
+    Ok(text)
 }
 
 /// Parse `text` (unknown keys are errors where the type says `deny_unknown_fields`) and

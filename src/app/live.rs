@@ -54,6 +54,10 @@ pub struct LiveCounters {
     pub own_echo: u64,
     /// System ids heard from two senders at once, not yet made decisions.
     pub two_sources: Vec<(u8, String)>,
+    /// From a frame's receive to the end of its processing (estimates, decisions written).
+    pub processed: super::latency::Latency,
+    /// The same, for the frames that wrote a decision.
+    pub decided: super::latency::Latency,
 }
 
 /// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
@@ -71,7 +75,7 @@ pub async fn run(
     // summary if the reader does not hand back its final ones in time.
     let live_counters = std::sync::Arc::new(std::sync::Mutex::new(LiveCounters::default()));
     let reader_counters = live_counters.clone();
-    let (tx, mut rx) = mpsc::channel::<Frame>(opts.channel_capacity);
+    let (tx, mut rx) = mpsc::channel::<(Frame, Instant)>(opts.channel_capacity);
     let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<LiveCounters, ConnError>>();
     // Frames for the vehicle link (only SET_MESSAGE_INTERVAL, only with --request-rates).
     let (vehicle_tx, mut vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
@@ -95,7 +99,7 @@ pub async fn run(
                         }
                     }
                     Ok(Received::Frame(frame)) => {
-                        if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(frame) {
+                        if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send((frame, Instant::now())) {
                             drops += 1;
                         }
                         if let Ok(mut c) = reader_counters.lock() {
@@ -122,6 +126,8 @@ pub async fn run(
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
     let mut own_echo = 0u64;
+    let mut processed = super::latency::Latency::default();
+    let mut decided = super::latency::Latency::default();
     let mut silence_told = false;
     let mut rates = RateRequests::default();
     // 10 Hz: link-loss checks, alerts and the dashboard's redraw.
@@ -144,7 +150,7 @@ pub async fn run(
     loop {
         tokio::select! {
             frame = rx.recv() => {
-                let Some(frame) = frame else { break };
+                let Some((frame, received)) = frame else { break };
                 // Our own alerts, echoed back in under the vehicle's system id, would keep a
                 // vehicle that has gone silent "alive" (no link_lost, no --exit-idle).
                 if sink.alerts.is_some() && frame.compid == ahcmon::output::alerts::ALERT_COMPID {
@@ -164,7 +170,12 @@ pub async fn run(
                         let _ = vehicle_tx.send(out).await;
                     }
                 }
+                let decisions = sink.seen.len();
                 monitor.on_frame_at(&frame, Some(now.duration_since(clock).as_secs_f64()), sink);
+                processed.record(received.elapsed());
+                if sink.seen.len() > decisions {
+                    decided.record(received.elapsed());
+                }
                 // The alerts speak as a vehicle's system id from when the vehicle is known.
                 if let Some(a) = sink.alerts.as_mut()
                     && monitor.assembler.vehicles.contains_key(&frame.sysid)
@@ -263,6 +274,8 @@ pub async fn run(
     };
     result.map(|mut c| {
         c.own_echo = own_echo;
+        c.processed = processed;
+        c.decided = decided;
         c
     })
 }

@@ -39,6 +39,7 @@ pub mod benchmark;
 pub mod calibrate;
 pub mod eval;
 mod fly;
+mod latency;
 mod live;
 pub mod log;
 mod matrix;

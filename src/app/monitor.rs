@@ -281,6 +281,18 @@ fn monitor(
             counters.backpressure_drops
         );
     }
+    if counters.processed.count() > 0 {
+        outln!(
+            "latency from a frame's receive to its estimates and decisions written: {}",
+            counters.processed.describe("frames")
+        );
+    }
+    if counters.decided.count() > 0 {
+        outln!(
+            "latency from receive to a decision written: {}",
+            counters.decided.describe("frames that decided")
+        );
+    }
     if counters.own_echo > 0 {
         outln!(
             "{} of our own alert frames (component {}) came back in on the vehicle link and were ignored: the forwarder sends our alerts back to us (harmless)",

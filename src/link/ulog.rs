@@ -165,6 +165,23 @@ const OUTPUT_FIELDS: [&str; 16] = [
     "output[15]",
 ];
 
+/// A panic inside px4-ulog is reported as a damaged log, not printed as a crash: the default
+/// hook stays for every other panic.
+fn quiet_px4_ulog_panics() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !info
+                .location()
+                .is_some_and(|l| l.file().contains("px4-ulog"))
+            {
+                previous(info);
+            }
+        }));
+    });
+}
+
 /// Read a ULog file, calling `emit` for each record.
 pub fn read(path: &std::path::Path, emit: &mut dyn FnMut(&Record)) -> Result<LogReport, LogError> {
     let path_str = path
@@ -180,7 +197,10 @@ pub fn read(path: &std::path::Path, emit: &mut dyn FnMut(&Record)) -> Result<Log
         vehicle_sent: false,
     };
     let mut messages = 0u64;
-    let completeness =
+    // px4-ulog indexes into messages without checking their length (an empty 'A' message
+    // panics, found by fuzzing): its panic is caught and the log called damaged.
+    quiet_px4_ulog_panics();
+    let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         px4_ulog::stream_parser::read_file_with_simple_callback(path_str, &mut |m| {
             messages += 1;
             match m {
@@ -209,10 +229,17 @@ pub fn read(path: &std::path::Path, emit: &mut dyn FnMut(&Record)) -> Result<Log
             }
             SimpleCallbackResult::KeepReading
         })
-        .map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied => LogError::Io(e),
-            _ => LogError::Malformed(e.to_string()),
-        })?;
+    }));
+    let completeness = match parsed {
+        Ok(r) => r,
+        Err(_) => Ok(Completeness::MalformedRecord(
+            "the ULog reader failed on it".into(),
+        )),
+    }
+    .map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied => LogError::Io(e),
+        _ => LogError::Malformed(e.to_string()),
+    })?;
     report.counters.frames = messages;
     match completeness {
         Completeness::Complete => {}
