@@ -77,6 +77,9 @@ impl Monitor {
     pub fn finish(&mut self, sink: &mut dyn Sink) {
         let ids: Vec<u8> = self.assembler.vehicles.keys().copied().collect();
         for sysid in ids {
+            if let Some(p) = self.pipelines.get_mut(&sysid) {
+                p.settle(sink);
+            }
             self.samples.clear();
             if let Some(v) = self.assembler.vehicles.get_mut(&sysid) {
                 v.flush(&mut self.samples);

@@ -150,7 +150,11 @@ fn monitor(
             .transpose()?,
         ..Default::default()
     };
-    let mut monitor = Monitor::new(args.pipeline_config()?);
+    // Live, a calibration's fit must not hold back the other vehicles' frames.
+    let mut monitor = Monitor::new(ahcmon::pipeline::PipelineConfig {
+        fit_in_background: true,
+        ..args.pipeline_config()?
+    });
     let signing = args.signing()?;
     let mut files = args.files(&[], &[])?;
     if alerts.is_some() {

@@ -158,12 +158,29 @@ impl VehiclePipeline {
             None => s.t - start >= Self::stretch_s(&self.cfg, profile).unwrap_or(f64::INFINITY),
         };
         if done {
-            let profile = (**profile).clone();
-            let samples = std::mem::take(samples);
-            self.stretch = std::mem::take(raw);
-            self.start_running(profile, &samples, sink);
-            self.stretch = Vec::new();
+            if self.cfg.fit_in_background {
+                self.fit_in_background(Self::end_calibration);
+            } else {
+                self.end_calibration(sink);
+            }
         }
+    }
+
+    /// The stretch is complete: fit, and start estimating.
+    fn end_calibration(&mut self, sink: &mut dyn Sink) {
+        let Stage::Calibrating {
+            profile,
+            samples,
+            raw,
+        } = &mut self.stage
+        else {
+            return;
+        };
+        let profile = (**profile).clone();
+        let samples = std::mem::take(samples);
+        self.stretch = std::mem::take(raw);
+        self.start_running(profile, &samples, sink);
+        self.stretch = Vec::new();
     }
 
     /// The calibration stretch was unusable (too short, too many holes): not the vehicle, so

@@ -10,6 +10,7 @@
 
 mod calibrating;
 mod commands;
+mod fitting;
 mod gate;
 mod holes;
 mod running;
@@ -48,6 +49,9 @@ pub struct PipelineConfig {
     pub calibrate_s: f64,
     /// End the healthy stretch at this vehicle time instead (s since boot).
     pub calibrate_until: Option<f64>,
+    /// Fit the calibration on a worker thread while the samples that arrive meanwhile wait
+    /// (the live monitor: `fitting.rs`); otherwise in place (replay, tests: deterministic).
+    pub fit_in_background: bool,
 }
 
 impl Default for PipelineConfig {
@@ -60,6 +64,7 @@ impl Default for PipelineConfig {
             settle_s: 3.0,
             calibrate_s: 20.0,
             calibrate_until: None,
+            fit_in_background: false,
         }
     }
 }
@@ -73,6 +78,8 @@ enum Stage {
         raw: Vec<TelemetrySample>,
     },
     Running(Box<Running>),
+    /// The calibration's fit on a worker thread (`fitting.rs`).
+    Fitting(Box<fitting::Fitting>),
     /// The profile could not be chosen or the filters not built; said once.
     Failed,
 }
@@ -394,13 +401,14 @@ impl VehiclePipeline {
                 "cannot estimate"
             }
             Stage::Grounded => "waiting for flight",
-            Stage::Calibrating { .. } => "calibrating",
+            Stage::Calibrating { .. } | Stage::Fitting(_) => "calibrating",
             Stage::Failed => "failed",
         }
     }
 
     /// The vehicle rebooted: start over.
     pub fn reset(&mut self, t: f64, sink: &mut dyn Sink) {
+        self.settle(sink);
         if let Stage::Running(r) = &self.stage {
             let d = Decision::monitor(t, self.sysid, Event::FilterReset, "vehicle rebooted");
             sink.decision(&d);
@@ -447,6 +455,10 @@ impl VehiclePipeline {
     }
 
     pub fn on_sample(&mut self, s: &TelemetrySample, info: &VehicleInfo, sink: &mut dyn Sink) {
+        if let Stage::Fitting(_) = self.stage {
+            self.hold(s, info, sink);
+            return;
+        }
         self.last_sample_t = Some(s.t);
         if !self.airborne(s) {
             self.on_ground(s, info, sink);
@@ -461,6 +473,7 @@ impl VehiclePipeline {
             Stage::Grounded => self.take_off(s, info, since, sink),
             Stage::Calibrating { .. } => self.calibrating(s, sink),
             Stage::Running(_) => self.running(s, sink),
+            Stage::Fitting(_) => {}
         }
     }
 }
