@@ -60,6 +60,11 @@ const COLOUR_MEMORY_S: f64 = 60.0;
 /// While nothing is under way, the data are read this often (s): a quarter of `CLASS_MIN_S`,
 /// the least a change lasts before the data alarm on it.
 const SCAN_S: f64 = 0.25;
+/// While a change is under way the store is searched at most this often (s): a twentieth of
+/// `CHANGE_MIN_S`, so a change's stretch grows by at most 5 % of the shortest between two
+/// searches. At 50 Hz every sample is searched; at 400 Hz every fourth (the search is most of
+/// a step's cost, and a 400 Hz vehicle took 4 % of a core).
+const SEARCH_INTERVAL_S: f64 = 0.01;
 /// How long a filter alarm waits for the data before F2 decides it (s). The change test needs
 /// `CHANGE_MIN_S` to fit and about a second to be clear; a filters' misreading at a fault's
 /// onset ends within their alarm plus `clear_s`.
@@ -195,6 +200,8 @@ pub struct Diagnoser {
     /// "the data fit it best" takes a reading of what is under way).
     next_scan: f64,
     reading_scanned: bool,
+    /// When the store may next be searched while a change is under way (`SEARCH_INTERVAL_S`).
+    next_search: f64,
     /// Rule X1: the lean limit, since when the vehicle has been out of its envelope and why,
     /// and whether that has lasted `ENVELOPE_S` (a crash).
     envelope_rad: f64,
@@ -252,6 +259,7 @@ impl Diagnoser {
             whitened: None,
             reading_whitened: false,
             next_scan: f64::NEG_INFINITY,
+            next_search: f64::NEG_INFINITY,
             reading_scanned: false,
             envelope_rad: if profile.vehicle == crate::telemetry::VehicleKind::Plane {
                 ENVELOPE_PLANE_RAD
@@ -466,27 +474,34 @@ impl Diagnoser {
         if scan {
             self.next_scan = t + SCAN_S;
         }
-        // Until a fault is in force the whitened search reads changes (a step's weight is in
-        // its first samples, before the wind has moved); a level that has stood longer than
-        // the store looks to it like the wind, so a decided fault is followed by the plain one.
-        let whitened_reading = if (under_way || scan) && !self.fault_in_force() {
-            self.change.whitened_search()
-        } else {
-            None
-        };
-        self.reading_whitened = whitened_reading.is_some();
-        self.reading_scanned = !under_way;
-        self.reading = if under_way {
-            whitened_reading.or_else(|| self.change.evaluate())
-        } else {
-            whitened_reading
-        };
-        self.whitened = self.reading.and_then(|r| {
-            let gain_or_offset = matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset);
-            (!self.is_angle[r.actuator] && gain_or_offset)
-                .then(|| self.change.whitened_gain_or_offset(r.actuator, r.samples))
-                .flatten()
-        });
+        // Under way, between two searches the last reading stands.
+        let search = !under_way || t >= self.next_search;
+        if search {
+            if under_way {
+                self.next_search = t + SEARCH_INTERVAL_S;
+            }
+            // Until a fault is in force the whitened search reads changes (a step's weight is in
+            // its first samples, before the wind has moved); a level that has stood longer than
+            // the store looks to it like the wind, so a decided fault is followed by the plain one.
+            let whitened_reading = if (under_way || scan) && !self.fault_in_force() {
+                self.change.whitened_search()
+            } else {
+                None
+            };
+            self.reading_whitened = whitened_reading.is_some();
+            self.reading_scanned = !under_way;
+            self.reading = if under_way {
+                whitened_reading.or_else(|| self.change.evaluate())
+            } else {
+                whitened_reading
+            };
+            self.whitened = self.reading.and_then(|r| {
+                let gain_or_offset = matches!(r.kind, ChangeKind::Gain | ChangeKind::Offset);
+                (!self.is_angle[r.actuator] && gain_or_offset)
+                    .then(|| self.change.whitened_gain_or_offset(r.actuator, r.samples))
+                    .flatten()
+            });
+        }
         let preferred = self.naming_reading().map(|r| r.actuator);
         let mut explained = [[[0.0; MAX_ACTUATORS]; 2]; 3];
         for (k, (xs, rs)) in explained.iter_mut().zip(&raw).enumerate() {
