@@ -72,11 +72,14 @@ pub fn dataflash(bytes: &[u8]) {
 }
 
 /// A ULog into the monitor. The ULog reader reads files, so the bytes go through one (in the
-/// temporary directory, one per process).
+/// temporary directory, one per call).
 pub fn ulog(bytes: &[u8]) {
-    let path = std::env::temp_dir().join(format!("ahcmon-fuzz-{}.ulg", std::process::id()));
-    if std::fs::write(&path, bytes).is_err() {
-        return;
+    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!("ahcmon-fuzz-{}-{n}.ulg", std::process::id()));
+    // Not the input's fault, and a silent return would fuzz nothing.
+    if let Err(e) = std::fs::write(&path, bytes) {
+        panic!("cannot write {}: {e}", path.display());
     }
     let mut monitor = Monitor::new(PipelineConfig::default());
     let Some(mut sink) = silent() else {

@@ -85,6 +85,10 @@ impl Monitor {
                 v.flush(&mut self.samples);
             }
             self.run(sysid, sink);
+            // The last samples may have ended a calibration stretch.
+            if let Some(p) = self.pipelines.get_mut(&sysid) {
+                p.settle(sink);
+            }
             if let (Some(v), Some(p)) = (
                 self.assembler.vehicles.get_mut(&sysid),
                 self.pipelines.get_mut(&sysid),
@@ -92,6 +96,14 @@ impl Monitor {
             {
                 p.reset(v.clock().unwrap_or(0.0), sink);
             }
+        }
+    }
+
+    /// Take back every calibration fit that has finished on its worker (a vehicle that went
+    /// quiet during its fit sends no sample to do it).
+    pub fn settle_finished_fits(&mut self, sink: &mut dyn Sink) {
+        for p in self.pipelines.values_mut() {
+            p.settle_if_done(sink);
         }
     }
 

@@ -87,21 +87,26 @@ pub fn find(
 pub const MAX_TOML_BYTES: u64 = 1 << 20;
 
 fn read_capped(path: &Path) -> std::io::Result<String> {
+    let bytes = read_at_most(path, MAX_TOML_BYTES, "a profile or scenario")?;
+    String::from_utf8(bytes)
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()))
+}
+
+/// A small input file's bytes, refused past `cap` (`what` names it in the error) instead of
+/// read to the end of a device or pipe that never ends.
+pub fn read_at_most(path: &Path, cap: u64, what: &str) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
-    let mut text = String::new();
+    let mut bytes = Vec::new();
     std::fs::File::open(path)?
-        .take(MAX_TOML_BYTES + 1)
-        .read_to_string(&mut text)?;
-    if text.len() as u64 > MAX_TOML_BYTES {
+        .take(cap + 1)
+        .read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > cap {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
-            format!(
-                "over {} KiB: not a profile or scenario",
-                MAX_TOML_BYTES >> 10
-            ),
+            format!("over {} KiB: not {what}", cap >> 10),
         ));
     }
-    Ok(text)
+    Ok(bytes)
 }
 
 /// Parse `text` (unknown keys are errors where the type says `deny_unknown_fields`) and

@@ -327,7 +327,7 @@ fn a_ulog_with_an_empty_subscription_is_a_damaged_log_not_a_panic() {
     let (code, out, err) = common::ahcmon(&["replay", path.to_str().unwrap()]);
     assert!(!err.contains("panicked"), "{err}");
     assert!(
-        out.contains("a damaged message (the ULog reader failed on it)"),
+        out.contains("a damaged message (the ULog reader failed on it: index out of bounds"),
         "exit {code}\n{out}\n{err}"
     );
 }

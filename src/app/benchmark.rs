@@ -57,7 +57,16 @@ pub fn run(a: BenchmarkArgs) -> anyhow::Result<()> {
     // Every truth file parsed and every log found before anything is replayed or written.
     let mut sets = Vec::new();
     for path in &a.truth {
-        let text = std::fs::read_to_string(path).map_err(|source| InputFileError {
+        let text = ahcmon::toml_file::read_at_most(
+            path,
+            ahcmon::toml_file::MAX_TOML_BYTES,
+            "a truth file",
+        )
+        .and_then(|b| {
+            String::from_utf8(b)
+                .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()))
+        })
+        .map_err(|source| InputFileError {
             path: path.display().to_string(),
             source,
         })?;

@@ -56,7 +56,10 @@ impl Latency {
         for (i, n) in self.buckets.iter().enumerate() {
             seen += n;
             if seen >= rank {
-                return if i < FINE {
+                // The last bucket holds everything from 10 s: its edge is the largest seen.
+                return if i == FINE + COARSE - 1 {
+                    self.max
+                } else if i < FINE {
                     Duration::from_micros(i as u64 + 1)
                 } else {
                     Duration::from_millis((i - FINE + 2) as u64)

@@ -185,6 +185,7 @@ pub async fn run(
                 send_alerts(sink, alerts.as_mut(), clock).await;
             }
             _ = tick.tick() => {
+                monitor.settle_finished_fits(sink);
                 send_alerts(sink, alerts.as_mut(), clock).await;
                 let now = Instant::now();
                 let over = opts

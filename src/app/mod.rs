@@ -80,10 +80,14 @@ impl RunArgs {
         let Some(path) = &self.signing_key_file else {
             return Ok(None);
         };
-        let bytes = std::fs::read(path).map_err(|source| InputFileError {
-            path: path.display().to_string(),
-            source,
-        })?;
+        // A key file is 32 bytes, or 64 hex digits with a line end.
+        let bytes =
+            ahcmon::toml_file::read_at_most(path, 1024, "a key file").map_err(|source| {
+                InputFileError {
+                    path: path.display().to_string(),
+                    source,
+                }
+            })?;
         let key = ahcmon::protocol::signing::Signing::key_from_file_contents(&bytes)
             .map_err(|e| UsageError(format!("--signing-key-file {}: {e}", path.display())))?;
         Ok(Some(ahcmon::protocol::signing::Signing::new(key)))

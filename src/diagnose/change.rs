@@ -210,6 +210,8 @@ pub struct ChangeTest {
     buf: Vec<Entry>,
     head: usize,
     len: usize,
+    /// Samples pushed since the start (a reading's stretch grows by the ones pushed after it).
+    pushed: u64,
     /// The shortest changed stretch considered (samples).
     min_samples: usize,
     /// The residual's colour, learned on healthy stretches and on identified faults (see [`Colour`]).
@@ -258,6 +260,7 @@ impl ChangeTest {
             ],
             head: 0,
             len: 0,
+            pushed: 0,
             min_samples: min_samples.max(2),
             colour: Colour {
                 memory: colour_memory.max(1),
@@ -346,6 +349,7 @@ impl ChangeTest {
         self.buf[self.head] = e;
         self.head = (self.head + 1) % cap;
         self.len = (self.len + 1).min(cap);
+        self.pushed += 1;
     }
 
     /// Forget the stored residuals (a gap in the telemetry, a restart).
@@ -361,6 +365,11 @@ impl ChangeTest {
 
     pub fn len(&self) -> usize {
         self.len
+    }
+
+    /// Samples pushed since the start.
+    pub fn pushed(&self) -> u64 {
+        self.pushed
     }
 
     pub fn is_empty(&self) -> bool {

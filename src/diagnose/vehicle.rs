@@ -60,10 +60,10 @@ const COLOUR_MEMORY_S: f64 = 60.0;
 /// While nothing is under way, the data are read this often (s): a quarter of `CLASS_MIN_S`,
 /// the least a change lasts before the data alarm on it.
 const SCAN_S: f64 = 0.25;
-/// While a change is under way the store is searched at most this often (s): a twentieth of
-/// `CHANGE_MIN_S`, so a change's stretch grows by at most 5 % of the shortest between two
-/// searches. At 50 Hz every sample is searched; at 400 Hz every fourth (the search is most of
-/// a step's cost, and a 400 Hz vehicle took 4 % of a core).
+/// While a change is under way the store is searched about this often (s): a twentieth of
+/// `CHANGE_MIN_S`. Between two searches the last reading stands, its stretch extended by the
+/// samples stored since. At 50 Hz every sample is searched; at 400 Hz every fourth (the search
+/// is most of a step's cost, and a 400 Hz vehicle took 4 % of a core).
 const SEARCH_INTERVAL_S: f64 = 0.01;
 /// How long a filter alarm waits for the data before F2 decides it (s). The change test needs
 /// `CHANGE_MIN_S` to fit and about a second to be clear; a filters' misreading at a fault's
@@ -200,8 +200,10 @@ pub struct Diagnoser {
     /// "the data fit it best" takes a reading of what is under way).
     next_scan: f64,
     reading_scanned: bool,
-    /// When the store may next be searched while a change is under way (`SEARCH_INTERVAL_S`).
+    /// When the store may next be searched while a change is under way (`SEARCH_INTERVAL_S`),
+    /// and the store's count of samples pushed when the reading was last brought up to date.
     next_search: f64,
+    search_pushed: u64,
     /// Rule X1: the lean limit, since when the vehicle has been out of its envelope and why,
     /// and whether that has lasted `ENVELOPE_S` (a crash).
     envelope_rad: f64,
@@ -260,6 +262,7 @@ impl Diagnoser {
             reading_whitened: false,
             next_scan: f64::NEG_INFINITY,
             next_search: f64::NEG_INFINITY,
+            search_pushed: 0,
             reading_scanned: false,
             envelope_rad: if profile.vehicle == crate::telemetry::VehicleKind::Plane {
                 ENVELOPE_PLANE_RAD
@@ -474,12 +477,21 @@ impl Diagnoser {
         if scan {
             self.next_scan = t + SCAN_S;
         }
-        // Under way, between two searches the last reading stands.
+        // Under way, between two searches the last reading stands, over the samples since.
+        // (Half a period early: a search every 10 ms at 100 Hz despite rounding.)
         let search = !under_way || t >= self.next_search;
+        let pushed = self.change.pushed();
+        if !search && let Some(r) = &mut self.reading {
+            let since = usize::try_from(pushed - self.search_pushed).unwrap_or(usize::MAX);
+            r.samples = r.samples.saturating_add(since).min(self.change.len());
+        }
+        self.search_pushed = pushed;
         if search {
-            if under_way {
-                self.next_search = t + SEARCH_INTERVAL_S;
-            }
+            self.next_search = if under_way {
+                t + SEARCH_INTERVAL_S - 0.5 * self.dt
+            } else {
+                f64::NEG_INFINITY
+            };
             // Until a fault is in force the whitened search reads changes (a step's weight is in
             // its first samples, before the wind has moved); a level that has stood longer than
             // the store looks to it like the wind, so a decided fault is followed by the plain one.

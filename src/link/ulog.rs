@@ -165,17 +165,33 @@ const OUTPUT_FIELDS: [&str; 16] = [
     "output[15]",
 ];
 
-/// A panic inside px4-ulog is reported as a damaged log, not printed as a crash: the default
-/// hook stays for every other panic.
+thread_local! {
+    /// Set while px4-ulog's own code runs on this thread (not our callback inside it).
+    static IN_PX4_ULOG: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// What px4-ulog's last panic on this thread said.
+    static PX4_ULOG_PANIC: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+}
+
+/// A panic inside px4-ulog is kept for the log's note instead of printed as a crash; every
+/// other panic goes to the hook there was. (With `panic = "abort"` nothing can be caught: the
+/// profiles here unwind.)
 fn quiet_px4_ulog_panics() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         let previous = std::panic::take_hook();
         std::panic::set_hook(Box::new(move |info| {
-            if !info
-                .location()
-                .is_some_and(|l| l.file().contains("px4-ulog"))
-            {
+            if IN_PX4_ULOG.with(std::cell::Cell::get) {
+                let at = info
+                    .location()
+                    .map_or(String::new(), |l| format!(" at {}:{}", l.file(), l.line()));
+                let what = info
+                    .payload()
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| info.payload().downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                PX4_ULOG_PANIC.with(|p| *p.borrow_mut() = Some(format!("{what}{at}")));
+            } else {
                 previous(info);
             }
         }));
@@ -200,41 +216,62 @@ pub fn read(path: &std::path::Path, emit: &mut dyn FnMut(&Record)) -> Result<Log
     // px4-ulog indexes into messages without checking their length (an empty 'A' message
     // panics, found by fuzzing): its panic is caught and the log called damaged.
     quiet_px4_ulog_panics();
+    // A panic in our own code inside the callback is not the log's: kept, and raised again
+    // once px4-ulog has returned.
+    let mut ours: Option<Box<dyn std::any::Any + Send>> = None;
+    IN_PX4_ULOG.with(|f| f.set(true));
     let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         px4_ulog::stream_parser::read_file_with_simple_callback(path_str, &mut |m| {
-            messages += 1;
-            match m {
-                Message::Data(data) => d.data(data, emit),
-                Message::ParameterMessage(p) => {
-                    let (name, value) = match p {
-                        ParameterMessage::Float(n, v, _) => (*n, *v),
-                        ParameterMessage::Int32(n, v, _) => {
-                            if *n == "MAV_TYPE" {
-                                d.mav_type = Some(*v);
+            IN_PX4_ULOG.with(|f| f.set(false));
+            let step = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                messages += 1;
+                match m {
+                    Message::Data(data) => d.data(data, emit),
+                    Message::ParameterMessage(p) => {
+                        let (name, value) = match p {
+                            ParameterMessage::Float(n, v, _) => (*n, *v),
+                            ParameterMessage::Int32(n, v, _) => {
+                                if *n == "MAV_TYPE" {
+                                    d.mav_type = Some(*v);
+                                }
+                                (*n, *v as f32)
                             }
-                            (*n, *v as f32)
-                        }
-                    };
-                    emit(&Record::Param {
-                        name: name.to_string(),
-                        value,
-                    });
+                        };
+                        emit(&Record::Param {
+                            name: name.to_string(),
+                            value,
+                        });
+                    }
+                    Message::LoggedMessage(s) => emit(&Record::Text(s.logged_message.to_string())),
+                    Message::TaggedLoggedMessage(s) => {
+                        emit(&Record::Text(s.logged_message.to_string()));
+                    }
+                    Message::DropoutMessage(drop) => report.note_dropout(drop.duration_ms),
+                    _ => {}
                 }
-                Message::LoggedMessage(s) => emit(&Record::Text(s.logged_message.to_string())),
-                Message::TaggedLoggedMessage(s) => {
-                    emit(&Record::Text(s.logged_message.to_string()));
+            }));
+            IN_PX4_ULOG.with(|f| f.set(true));
+            match step {
+                Ok(()) => SimpleCallbackResult::KeepReading,
+                Err(payload) => {
+                    ours = Some(payload);
+                    SimpleCallbackResult::Stop
                 }
-                Message::DropoutMessage(drop) => report.note_dropout(drop.duration_ms),
-                _ => {}
             }
-            SimpleCallbackResult::KeepReading
         })
     }));
+    IN_PX4_ULOG.with(|f| f.set(false));
+    if let Some(payload) = ours {
+        std::panic::resume_unwind(payload);
+    }
     let completeness = match parsed {
         Ok(r) => r,
-        Err(_) => Ok(Completeness::MalformedRecord(
-            "the ULog reader failed on it".into(),
-        )),
+        Err(_) => Ok(Completeness::MalformedRecord(format!(
+            "the ULog reader failed on it: {}",
+            PX4_ULOG_PANIC
+                .with(|p| p.borrow_mut().take())
+                .unwrap_or_default()
+        ))),
     }
     .map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied => LogError::Io(e),

@@ -159,7 +159,7 @@ impl VehiclePipeline {
         };
         if done {
             if self.cfg.fit_in_background {
-                self.fit_in_background(Self::end_calibration);
+                self.fit_in_background(Self::end_calibration, sink);
             } else {
                 self.end_calibration(sink);
             }

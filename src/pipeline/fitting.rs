@@ -53,15 +53,34 @@ impl Said {
 }
 
 pub(super) struct Fitting {
-    worker: Option<std::thread::JoinHandle<(VehiclePipeline, Said)>>,
+    worker: Option<std::thread::JoinHandle<Option<(VehiclePipeline, Said)>>>,
     /// Samples that arrived while the worker fitted, with what was known of the vehicle.
     held: Vec<(TelemetrySample, VehicleInfo)>,
 }
 
 impl VehiclePipeline {
     /// Hand this pipeline, at the end of its calibration stretch, to a worker thread that
-    /// runs `finish` on it; this one becomes its stand-in until [`Self::settle`].
-    pub(super) fn fit_in_background(&mut self, finish: fn(&mut VehiclePipeline, &mut dyn Sink)) {
+    /// runs `finish` on it; this one becomes its stand-in until [`Self::settle`]. Without a
+    /// thread to be had, `finish` runs here.
+    pub(super) fn fit_in_background(
+        &mut self,
+        finish: fn(&mut VehiclePipeline, &mut dyn Sink),
+        sink: &mut dyn Sink,
+    ) {
+        // The thread first, the pipeline sent to it after: a failed start keeps it here.
+        let (tx, rx) = std::sync::mpsc::channel::<VehiclePipeline>();
+        let started = std::thread::Builder::new()
+            .name(format!("fit sysid {}", self.sysid))
+            .spawn(move || {
+                let mut pipeline = rx.recv().ok()?;
+                let mut said = Said::default();
+                finish(&mut pipeline, &mut said);
+                Some((pipeline, said))
+            });
+        let Ok(worker) = started else {
+            finish(self, sink);
+            return;
+        };
         let mut stand_in = VehiclePipeline::new(self.sysid, self.cfg.clone());
         stand_in.detection = self.detection.clone();
         stand_in.last = self.last;
@@ -73,27 +92,17 @@ impl VehiclePipeline {
         stand_in.airborne_since = self.airborne_since;
         stand_in.armed_since = self.armed_since;
         stand_in.before_reboot = self.before_reboot;
-        let mut pipeline = std::mem::replace(self, stand_in);
-        let worker = std::thread::Builder::new()
-            .name(format!("fit sysid {}", self.sysid))
-            .spawn(move || {
-                let mut said = Said::default();
-                finish(&mut pipeline, &mut said);
-                (pipeline, said)
-            });
-        match worker {
-            Ok(w) => {
-                self.stage = Stage::Fitting(Box::new(Fitting {
-                    worker: Some(w),
-                    held: Vec::new(),
-                }));
-            }
-            // No thread to be had: the pipeline went with the closure that was not run.
-            Err(e) => self.fail(
-                format!("cannot start the calibration's fit: {e}"),
-                &mut Said::default(),
-            ),
+        let pipeline = std::mem::replace(self, stand_in);
+        if let Err(std::sync::mpsc::SendError(pipeline)) = tx.send(pipeline) {
+            // The worker is gone already: fit here.
+            *self = pipeline;
+            finish(self, sink);
+            return;
         }
+        self.stage = Stage::Fitting(Box::new(Fitting {
+            worker: Some(worker),
+            held: Vec::new(),
+        }));
     }
 
     /// While the worker fits: hold the sample; take the pipeline back once it is done.
@@ -102,33 +111,44 @@ impl VehiclePipeline {
             return;
         };
         f.held.push((*s, info.clone()));
-        if f.worker.as_ref().is_some_and(|w| w.is_finished()) {
+        self.settle_if_done(sink);
+    }
+
+    /// [`Self::settle`] if the worker is done; nothing otherwise (no wait).
+    pub fn settle_if_done(&mut self, sink: &mut dyn Sink) {
+        if let Stage::Fitting(f) = &self.stage
+            && f.worker.as_ref().is_some_and(|w| w.is_finished())
+        {
             self.settle(sink);
         }
     }
 
     /// Wait for a fit under way, take the pipeline back, pass on what it said and run the
-    /// samples held meanwhile through it. Nothing to do when no fit is under way.
+    /// samples held meanwhile through it, until no fit is under way (the held samples may end
+    /// another stretch). Nothing to do when none is. Called on the caller's thread: a reboot
+    /// or the end of the input during a fit waits for it (up to the fit's time).
     pub fn settle(&mut self, sink: &mut dyn Sink) {
-        let Stage::Fitting(f) = &mut self.stage else {
-            return;
-        };
-        let held = std::mem::take(&mut f.held);
-        let Some(worker) = f.worker.take() else {
-            return;
-        };
-        match worker.join() {
-            Ok((pipeline, said)) => {
-                *self = pipeline;
-                said.pass_on(sink);
-                for (s, info) in &held {
-                    self.on_sample(s, info, sink);
+        while let Stage::Fitting(f) = &mut self.stage {
+            let held = std::mem::take(&mut f.held);
+            let Some(worker) = f.worker.take() else {
+                return;
+            };
+            match worker.join() {
+                Ok(Some((pipeline, said))) => {
+                    *self = pipeline;
+                    said.pass_on(sink);
+                    for (s, info) in &held {
+                        self.on_sample(s, info, sink);
+                    }
+                }
+                _ => {
+                    self.fail(
+                        "the calibration's fit stopped on an internal error".into(),
+                        sink,
+                    );
+                    return;
                 }
             }
-            Err(_) => self.fail(
-                "the calibration's fit stopped on an internal error".into(),
-                sink,
-            ),
         }
     }
 }
@@ -190,7 +210,7 @@ mod tests {
         let (mut in_place, mut worker) = (pipeline(false), pipeline(true));
         let (mut said_in_place, mut said_worker) = (Trace::default(), Trace::default());
         let info = VehicleInfo::default();
-        let mut held = 0;
+        let mut fitted_apart = false;
         for _ in 0..3500 {
             let s = sim.step();
             let mut pwm = [0u16; 16];
@@ -208,12 +228,10 @@ mod tests {
             };
             in_place.on_sample(&sample, &info, &mut said_in_place);
             worker.on_sample(&sample, &info, &mut said_worker);
-            if let Stage::Fitting(f) = &worker.stage {
-                held = held.max(f.held.len());
-            }
+            fitted_apart |= matches!(worker.stage, Stage::Fitting(_));
         }
         worker.settle(&mut said_worker);
-        assert!(held > 0, "no sample waited for the worker");
+        assert!(fitted_apart, "the fit never ran on a worker");
         assert!(matches!(worker.stage, Stage::Running(_)));
         assert!(
             said_in_place.0.iter().any(|s| s.contains("Fault")),
