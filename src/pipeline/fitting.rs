@@ -157,7 +157,6 @@ impl VehiclePipeline {
 mod tests {
     use super::super::PipelineConfig;
     use super::*;
-    use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
 
     /// Everything a pipeline says, as text, in order.
     #[derive(Default)]
@@ -179,24 +178,10 @@ mod tests {
     /// the same order, and the worker was used.
     #[test]
     fn a_fit_on_a_worker_says_what_a_fit_in_place_says() {
-        let profile = Profile::resolve("quad-x").unwrap();
-        let mut cfg = VehicleSimConfig::calm(profile.clone(), 0.02, 5);
-        cfg.gusts = Some(crate::sim::vehicle::Gusts {
-            angular: [1.0, 1.0, 0.3],
-            vertical: 0.5,
-            tau_s: 1.0,
-        });
-        cfg.faults = vec![crate::sim::fault::Fault {
-            actuator: "motor2".into(),
-            t: 40.0,
-            until: None,
-            gamma: Some(0.5),
-            delta: None,
-            sine: None,
-            ramp: None,
-            stuck: None,
-        }];
-        let mut sim = VehicleSim::new(cfg).unwrap();
+        let (profile, samples) = super::super::tests::gusty_quad(
+            3500,
+            vec![super::super::tests::motor2_loss_from(40.0)],
+        );
         let pipeline = |background| {
             VehiclePipeline::new(
                 1,
@@ -211,23 +196,9 @@ mod tests {
         let (mut said_in_place, mut said_worker) = (Trace::default(), Trace::default());
         let info = VehicleInfo::default();
         let mut fitted_apart = false;
-        for _ in 0..3500 {
-            let s = sim.step();
-            let mut pwm = [0u16; 16];
-            for (j, a) in profile.actuators.iter().enumerate() {
-                pwm[usize::from(a.channel) - 1] = profile.to_pwm(j, s.u[j]).round() as u16;
-            }
-            let sample = TelemetrySample {
-                t: s.t,
-                rates: [s.y[0], s.y[1], s.y[2]],
-                attitude: s.attitude,
-                az: Some(s.y[3]),
-                pwm,
-                armed: true,
-                rel_alt: Some(10.0),
-            };
-            in_place.on_sample(&sample, &info, &mut said_in_place);
-            worker.on_sample(&sample, &info, &mut said_worker);
+        for sample in &samples {
+            in_place.on_sample(sample, &info, &mut said_in_place);
+            worker.on_sample(sample, &info, &mut said_worker);
             fitted_apart |= matches!(worker.stage, Stage::Fitting(_));
         }
         worker.settle(&mut said_worker);

@@ -422,8 +422,11 @@ fn pipeline_with(profile: &Profile) -> VehiclePipeline {
     )
 }
 
-/// The simulated quad in gusts, through the pipeline for `steps` samples with `faults`.
-fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decisions {
+/// The simulated quad in gusts for `steps` samples with `faults`, as telemetry.
+pub(super) fn gusty_quad(
+    steps: usize,
+    faults: Vec<crate::sim::fault::Fault>,
+) -> (Profile, Vec<TelemetrySample>) {
     let profile = Profile::resolve("quad-x").unwrap();
     let mut cfg = VehicleSimConfig::calm(profile.clone(), 0.02, 5);
     // The built-in scenarios' gusts.
@@ -434,31 +437,41 @@ fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decis
     });
     cfg.faults = faults;
     let mut sim = VehicleSim::new(cfg).unwrap();
+    let samples = (0..steps)
+        .map(|_| {
+            let s = sim.step();
+            let mut pwm = [0u16; 16];
+            for (j, a) in profile.actuators.iter().enumerate() {
+                pwm[usize::from(a.channel) - 1] = profile.to_pwm(j, s.u[j]).round() as u16;
+            }
+            TelemetrySample {
+                t: s.t,
+                rates: [s.y[0], s.y[1], s.y[2]],
+                attitude: s.attitude,
+                az: Some(s.y[3]),
+                pwm,
+                armed: true,
+                rel_alt: Some(10.0),
+            }
+        })
+        .collect();
+    (profile, samples)
+}
+
+/// The simulated quad in gusts, through the pipeline for `steps` samples with `faults`.
+fn fly_quad_faults(steps: usize, faults: Vec<crate::sim::fault::Fault>) -> Decisions {
+    let (profile, samples) = gusty_quad(steps, faults);
     let mut pipeline = pipeline_with(&profile);
     let mut sink = Decisions::default();
     let info = VehicleInfo::default();
-    for _ in 0..steps {
-        let s = sim.step();
-        let mut pwm = [0u16; 16];
-        for (j, a) in profile.actuators.iter().enumerate() {
-            pwm[usize::from(a.channel) - 1] = profile.to_pwm(j, s.u[j]).round() as u16;
-        }
-        let sample = TelemetrySample {
-            t: s.t,
-            rates: [s.y[0], s.y[1], s.y[2]],
-            attitude: s.attitude,
-            az: Some(s.y[3]),
-            pwm,
-            armed: true,
-            rel_alt: Some(10.0),
-        };
-        pipeline.on_sample(&sample, &info, &mut sink);
+    for sample in &samples {
+        pipeline.on_sample(sample, &info, &mut sink);
     }
     sink
 }
 
 /// Motor 2's gain at 0.5 from `t` to the end.
-fn motor2_loss_from(t: f64) -> crate::sim::fault::Fault {
+pub(super) fn motor2_loss_from(t: f64) -> crate::sim::fault::Fault {
     crate::sim::fault::Fault {
         actuator: "motor2".into(),
         t,
