@@ -172,9 +172,10 @@ pub async fn run(
                 }
                 let decisions = sink.seen.len();
                 monitor.on_frame_at(&frame, Some(now.duration_since(clock).as_secs_f64()), sink);
-                processed.record(received.elapsed());
+                let latency = received.elapsed();
+                processed.record(latency);
                 if sink.seen.len() > decisions {
-                    decided.record(received.elapsed());
+                    decided.record(latency);
                 }
                 // The alerts speak as a vehicle's system id from when the vehicle is known.
                 if let Some(a) = sink.alerts.as_mut()
