@@ -179,9 +179,10 @@ pub struct SimArgs {
 
 #[derive(clap::Args)]
 pub struct MonitorArgs {
-    /// udpin:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: and
-    /// tcp: are udpin: and tcpout:, as in MAVProxy). Not udpout or udpbcast: the monitor
-    /// sends nothing to the vehicle, so a UDP peer would never learn where to send.
+    /// udpin:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT, serial:DEVICE:BAUD, or a serial
+    /// device as MAVProxy's --master takes it: /dev/ttyUSB0,57600 or /dev/ttyUSB0 alone (57600
+    /// baud). udp: and tcp: are udpin: and tcpout:, as in MAVProxy. Not udpout or udpbcast: the
+    /// monitor sends nothing to the vehicle, so a UDP peer would never learn where to send.
     pub conn: String,
     #[command(flatten)]
     pub run: RunArgs,

@@ -654,13 +654,23 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
 /// our own framer, so bad CRCs and resyncs on a radio link are counted like on UDP.
 #[test]
 fn serial_link_frames_and_counts_what_it_drops() {
+    serial_link("live_serial", 3000, |device| format!("serial:{device}:57600"));
+}
+
+/// The same through MAVProxy's spelling of a serial device, `DEVICE,BAUD`.
+#[test]
+fn a_serial_device_spelled_as_for_mavproxy_is_read() {
+    serial_link("live_serial_mavproxy", 600, |device| format!("{device},57600"));
+}
+
+fn serial_link(name: &str, frames: u32, conn: impl Fn(&str) -> String) {
     use std::io::BufRead;
-    let dir = common::temp_dir("live_serial");
+    let dir = common::temp_dir(name);
     let (tlog, _) = sim_quad_tlog(&dir);
     let mut feeder = Command::new(common::python())
         .arg("tests/reference/serial_feeder.py")
         .arg(&tlog)
-        .arg("3000")
+        .arg(frames.to_string())
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(Stdio::piped())
         .spawn()
@@ -671,7 +681,7 @@ fn serial_link_frames_and_counts_what_it_drops() {
     let device = device.trim().to_string();
     assert!(device.starts_with("/dev/"), "feeder said {device:?}");
     let monitor = Command::new(bin())
-        .args(["monitor", &format!("serial:{device}:57600"), "--headless"])
+        .args(["monitor", &conn(&device), "--headless"])
         .args(["--exit-idle", "2"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -289,6 +289,38 @@ mod tests {
         );
     }
 
+    /// MAVProxy's `--master` forms of a serial device: `DEVICE,BAUD`, or the device alone at
+    /// its default 57600; `serial:DEVICE` too.
+    #[test]
+    fn a_serial_device_is_taken_as_mavproxy_spells_it() {
+        use crate::link::spec::DEFAULT_BAUD;
+        let serial = |d: &str, b| ConnSpec::Serial(d.into(), b);
+        for (spec, want) in [
+            ("/dev/ttyUSB0,57600", serial("/dev/ttyUSB0", 57600)),
+            ("/dev/ttyACM0,115200", serial("/dev/ttyACM0", 115200)),
+            ("/dev/ttyUSB0", serial("/dev/ttyUSB0", DEFAULT_BAUD)),
+            ("serial:/dev/ttyUSB0", serial("/dev/ttyUSB0", DEFAULT_BAUD)),
+            ("COM3,921600", serial("COM3", 921600)),
+            ("com4", serial("com4", DEFAULT_BAUD)),
+            // A by-path name holds colons; the whole of it is the device.
+            (
+                "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0,57600",
+                serial("/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0", 57600),
+            ),
+        ] {
+            assert_eq!(spec.parse::<ConnSpec>().unwrap(), want, "{spec}");
+        }
+        assert_eq!(DEFAULT_BAUD, 57600);
+        for (spec, says) in [
+            ("/dev/ttyUSB0,fast", "baud rate `fast`"),
+            ("/dev/ttyUSB0,0", "baud rate 0"),
+            ("COMX", "no kind"),
+        ] {
+            let e = spec.parse::<ConnSpec>().unwrap_err().to_string();
+            assert!(e.contains(says), "{spec}: {e}");
+        }
+    }
+
     #[test]
     fn a_tcp_connection_lost_and_made_again_is_told_as_it_happens() {
         runtime().block_on(async {

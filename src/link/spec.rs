@@ -1,6 +1,8 @@
 //! Connection strings, spelled as MAVProxy and rust-mavlink spell them: `udpin:HOST:PORT`,
 //! `udpout:HOST:PORT`, `udpbcast:HOST:PORT`, `tcpin:HOST:PORT`, `tcpout:HOST:PORT`,
-//! `serial:DEVICE:BAUD` (`udp:` is `udpin:`, `tcp:` is `tcpout:`).
+//! `serial:DEVICE:BAUD` (`udp:` is `udpin:`, `tcp:` is `tcpout:`), and a serial device as
+//! MAVProxy's `--master` takes it: `DEVICE,BAUD` or `DEVICE` alone (a path, or `COMn`), at
+//! [`DEFAULT_BAUD`] when none is given.
 
 use std::net::SocketAddr;
 use std::str::FromStr;
@@ -9,7 +11,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum ConnError {
     #[error(
-        "connection `{0}`: {1}; expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT or serial:DEVICE:BAUD (udp: is udpin:, tcp: is tcpout:)"
+        "connection `{0}`: {1}; expected udpin:HOST:PORT, udpout:HOST:PORT, udpbcast:HOST:PORT, tcpin:HOST:PORT, tcpout:HOST:PORT, serial:DEVICE:BAUD or DEVICE[,BAUD] (udp: is udpin:, tcp: is tcpout:)"
     )]
     Syntax(String, String),
     #[error("connection `{spec}`: {source}")]
@@ -29,6 +31,10 @@ pub enum ConnSpec {
     TcpOut(SocketAddr),
     Serial(String, u32),
 }
+
+/// The baud rate of a serial device given without one: MAVProxy's `--baudrate` default, the
+/// usual telemetry radio's rate.
+pub const DEFAULT_BAUD: u32 = 57600;
 
 /// Connection kinds (`udp` is `udpin`, `tcp` is `tcpout`, as in MAVProxy and pymavlink).
 const KINDS: [&str; 8] = [
@@ -53,10 +59,42 @@ pub(super) fn opening(spec: &ConnSpec, what: String) -> impl Fn(std::io::Error) 
     }
 }
 
+/// A baud rate as written, or why it is not one.
+fn baud_rate(baud: &str) -> Result<u32, String> {
+    match baud.parse() {
+        Ok(0) => Err("baud rate 0".into()),
+        Ok(b) => Ok(b),
+        Err(_) => Err(format!("baud rate `{baud}` is not a whole number")),
+    }
+}
+
+/// MAVProxy's serial form: a device path (or `COMn`) with an optional `,BAUD`. A path that
+/// exists with its comma is the device itself, as pymavlink reads it.
+fn device_form(s: &str) -> Option<Result<ConnSpec, String>> {
+    let upper = s.to_ascii_uppercase();
+    let looks_like_device = s.starts_with('/')
+        || s.starts_with(r"\\.\")
+        || (upper.starts_with("COM") && upper[3..].split(',').next()?.parse::<u16>().is_ok());
+    if !looks_like_device {
+        return None;
+    }
+    let split = s
+        .rsplit_once(',')
+        .filter(|_| !std::path::Path::new(s).exists());
+    Some(match split {
+        Some((dev, _)) if dev.is_empty() => Err("no device".into()),
+        Some((dev, baud)) => baud_rate(baud).map(|b| ConnSpec::Serial(dev.to_string(), b)),
+        None => Ok(ConnSpec::Serial(s.to_string(), DEFAULT_BAUD)),
+    })
+}
+
 impl FromStr for ConnSpec {
     type Err = ConnError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let bad = |why: String| ConnError::Syntax(s.to_string(), why);
+        if let Some(spec) = device_form(s) {
+            return spec.map_err(bad);
+        }
         let (kind, rest) = s.split_once(':').ok_or_else(|| {
             if KINDS.contains(&s) {
                 bad(format!("`{s}` needs an address after a `:`"))
@@ -65,17 +103,12 @@ impl FromStr for ConnSpec {
             }
         })?;
         if kind == "serial" {
-            let (dev, baud) = rest
-                .rsplit_once(':')
-                .ok_or_else(|| bad("no baud rate".into()))?;
-            let baud = baud
-                .parse()
-                .map_err(|_| bad(format!("baud rate `{baud}` is not a whole number")))?;
+            let (dev, baud) = match rest.rsplit_once(':') {
+                Some((dev, baud)) => (dev, baud_rate(baud).map_err(bad)?),
+                None => (rest, DEFAULT_BAUD),
+            };
             if dev.is_empty() {
                 return Err(bad("no device".into()));
-            }
-            if baud == 0 {
-                return Err(bad("baud rate 0".into()));
             }
             return Ok(Self::Serial(dev.to_string(), baud));
         }
