@@ -73,6 +73,41 @@ pub enum Command {
     Benchmark(BenchmarkArgs),
 }
 
+impl Command {
+    /// The output flags given as `-` (standard output).
+    pub fn stdout_flags(&self) -> Vec<&'static str> {
+        fn common(o: &OutputArgs) -> Vec<(&'static str, Option<&std::path::Path>)> {
+            o.flags().to_vec()
+        }
+        let flags: Vec<(&'static str, Option<&std::path::Path>)> = match self {
+            Command::Eval(a) => common(&a.output),
+            Command::Sim(a) => {
+                let mut f = common(&a.output);
+                f.extend([
+                    ("--truth", a.truth.as_deref()),
+                    ("--tlog", a.tlog.as_deref()),
+                ]);
+                f
+            }
+            Command::Monitor(a) => common(&a.run.output),
+            Command::Demo(a) => common(&a.output),
+            Command::Replay(a) => {
+                let mut f = common(&a.run.output);
+                f.push(("--plot", a.plot.as_deref()));
+                f
+            }
+            Command::Calibrate(a) => vec![("--output", Some(a.output.as_path()))],
+            Command::Benchmark(a) => vec![("--json", a.json.as_deref())],
+            Command::Thresholds(_) => vec![],
+        };
+        flags
+            .into_iter()
+            .filter(|(_, p)| p.is_some_and(ahcmon::output::file::is_stdout))
+            .map(|(flag, _)| flag)
+            .collect()
+    }
+}
+
 #[derive(clap::Args)]
 pub struct BenchmarkArgs {
     /// Truth files (TOML), one per dataset, e.g. tests/datasets/*.toml.
@@ -81,7 +116,8 @@ pub struct BenchmarkArgs {
     /// The folder the truth files' `file` paths are under.
     #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
-    /// Also write the results as one JSON document.
+    /// Also write the results as one JSON document (`-`: standard output, the table then on
+    /// standard error).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
 }
@@ -146,7 +182,8 @@ pub struct SimArgs {
     /// Scenario file or built-in name (a vehicle scenario, e.g. quad-x-motor2-loe).
     #[arg(long)]
     pub scenario: String,
-    /// Truth JSONL: per step, every actuator's true gamma and delta and the noise in force.
+    /// Truth JSONL: per step, every actuator's true gamma and delta and the noise in force
+    /// (`-`: standard output).
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
     // The JSON lines of the monitor's filters and diagnosis running on the flight.
@@ -160,7 +197,7 @@ pub struct SimArgs {
     /// the frame parameters. Paced at --speed (default real time).
     #[arg(long, value_name = "CONN")]
     pub out: Option<String>,
-    /// Write the same MAVLink stream as a .tlog.
+    /// Write the same MAVLink stream as a .tlog (`-`: standard output).
     #[arg(long, value_name = "FILE")]
     pub tlog: Option<PathBuf>,
     /// Multiple of real time for --out (default 1); without --out the tlog is written as
@@ -246,7 +283,7 @@ pub struct CalibrateArgs {
     /// it starts when the vehicle is airborne and settled.
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     pub until: f64,
-    /// The profile file to write.
+    /// The profile file to write (`-`: standard output).
     #[arg(short = 'o', long = "output", value_name = "PROFILE.toml")]
     pub output: PathBuf,
     /// Start from this profile's geometry instead of the detected one.
@@ -280,7 +317,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub headless: bool,
     /// Draw every actuator's gamma and delta with both filters' bounds and the decisions
-    /// into this SVG file.
+    /// into this SVG file (`-`: standard output).
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
 }
@@ -321,10 +358,12 @@ pub struct RunArgs {
 /// The JSON-lines files of a run (`replay`, `monitor`, `demo`, `sim`, `eval`).
 #[derive(clap::Args, Debug, Default)]
 pub struct OutputArgs {
-    /// Decisions JSONL (one object a line, flushed per line).
+    /// Decisions JSONL (one object a line, flushed per line); `-` streams them to standard
+    /// output, and the lines for a person go to standard error.
     #[arg(long, value_name = "FILE")]
     pub decisions: Option<PathBuf>,
-    /// Estimates JSONL (both filters, every actuator; every step, or see --decimate).
+    /// Estimates JSONL (both filters, every actuator; every step, or see --decimate); `-` for
+    /// standard output.
     #[arg(long, value_name = "FILE")]
     pub estimates: Option<PathBuf>,
     /// Write every k-th step's estimates.

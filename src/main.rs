@@ -41,6 +41,7 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
+    app::claim_stdout(&cli.command.stdout_flags())?;
     match cli.command {
         Command::Eval(a) => app::eval::run(a),
         Command::Thresholds(a) => app::thresholds::run(a),

@@ -654,13 +654,17 @@ fn nothing_goes_to_the_vehicle_unless_rates_are_requested() {
 /// our own framer, so bad CRCs and resyncs on a radio link are counted like on UDP.
 #[test]
 fn serial_link_frames_and_counts_what_it_drops() {
-    serial_link("live_serial", 3000, |device| format!("serial:{device}:57600"));
+    serial_link("live_serial", 3000, |device| {
+        format!("serial:{device}:57600")
+    });
 }
 
 /// The same through MAVProxy's spelling of a serial device, `DEVICE,BAUD`.
 #[test]
 fn a_serial_device_spelled_as_for_mavproxy_is_read() {
-    serial_link("live_serial_mavproxy", 600, |device| format!("{device},57600"));
+    serial_link("live_serial_mavproxy", 600, |device| {
+        format!("{device},57600")
+    });
 }
 
 fn serial_link(name: &str, frames: u32, conn: impl Fn(&str) -> String) {

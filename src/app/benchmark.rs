@@ -104,7 +104,9 @@ pub fn run(a: BenchmarkArgs) -> anyhow::Result<()> {
         .collect();
     check_outputs(&inputs, &[("--json", a.json.as_deref())])?;
     if let Some(json) = &a.json {
-        std::fs::write(json, "").with_context(|| format!("cannot write {}", json.display()))?;
+        // Fail now rather than after the replays; the file is replaced only at the end.
+        ahcmon::output::file::OutputFile::open(json)
+            .with_context(|| format!("cannot write {}", json.display()))?;
     }
     let n: usize = sets.iter().map(|s| s.cases.len()).sum();
     let mut progress = Progress::new(true);
@@ -133,7 +135,7 @@ pub fn run(a: BenchmarkArgs) -> anyhow::Result<()> {
     out!("{}", render(&runs));
     if let Some(json) = &a.json {
         let text = serde_json::to_string_pretty(&runs)?;
-        std::fs::write(json, text + "\n")
+        ahcmon::output::file::write_whole(json, (text + "\n").as_bytes())
             .with_context(|| format!("cannot write {}", json.display()))?;
     }
     let errors: Vec<&CaseRun> = runs

@@ -197,8 +197,11 @@ fn calibrate(
         quality.join(", ")
     );
     let text = toml::to_string(&calibrated).context("cannot serialise the profile")?;
-    std::fs::write(output, format!("# written by `ahcmon calibrate`\n{text}"))
-        .with_context(|| format!("cannot write {}", output.display()))?;
+    ahcmon::output::file::write_whole(
+        output,
+        format!("# written by `ahcmon calibrate`\n{text}").as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", output.display()))?;
     outln!("{}", calibrated.description);
     outln!("profile written to {}", output.display());
     Ok(())

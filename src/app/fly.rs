@@ -10,7 +10,6 @@ use ahcmon::scenario::NamedScenario;
 use ahcmon::sim::vehicle::VehicleSim;
 use ahcmon::telemetry::encode::{BOOT_OFFSET_S, SimTelemetry};
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::BufWriter;
 
 pub struct FlyOptions {
@@ -50,7 +49,7 @@ pub async fn fly(
     named: &NamedScenario,
     opts: &FlyOptions,
     mut link: Option<&mut Link>,
-    mut tlog: Option<&mut TlogWriter<BufWriter<File>>>,
+    mut tlog: Option<&mut TlogWriter<BufWriter<ahcmon::output::file::OutputFile>>>,
     mut truth: Option<&mut JsonlFile>,
 ) -> Result<FlyReport, FlyError> {
     let (cfg, _) = sim_config(named, opts.seed)?;

@@ -18,7 +18,8 @@ macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
         let text = format!($($arg)*);
-        if let Err(e) = std::io::stdout().write_all(ahcmon::output::printable(&text).as_bytes()) {
+        let mut out = ahcmon::output::file::for_people();
+        if let Err(e) = out.write_all(ahcmon::output::printable(&text).as_bytes()) {
             if e.kind() == std::io::ErrorKind::BrokenPipe {
                 std::process::exit(0);
             }
@@ -200,6 +201,23 @@ pub(crate) fn check_outputs(
         }
     }
     Ok(())
+}
+
+/// Output flags given as `-`: at most one may take standard output, and the text for a person
+/// then goes to standard error.
+pub(crate) fn claim_stdout(flags: &[&str]) -> Result<(), UsageError> {
+    match flags {
+        [] => Ok(()),
+        [_] => {
+            ahcmon::output::file::take_stdout();
+            Ok(())
+        }
+        [first, rest @ ..] => Err(UsageError(format!(
+            "{first} and {} {} name standard output (-): only one output can go there",
+            rest.join(" and "),
+            if rest.len() == 1 { "both" } else { "all" }
+        ))),
+    }
 }
 
 /// Errors that are the user's input (exit code 2) rather than ours (exit code 1).

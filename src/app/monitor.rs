@@ -75,7 +75,8 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
     };
     // Headless, the monitor stops once the simulated flight has ended; with the
     // dashboard the operator looks on until q.
-    let dashboard = !headless && std::io::stdout().is_terminal();
+    let dashboard =
+        !headless && std::io::stdout().is_terminal() && !ahcmon::output::file::stdout_taken();
     let idle = (!dashboard).then_some((1.5 / speed).max(0.5));
     monitor(
         "udpin:127.0.0.1:0",
@@ -130,7 +131,8 @@ fn monitor(
         .into());
     }
     // The dashboard unless asked not to, or when stdout is not a terminal (CI, pipes).
-    let dashboard = !headless && std::io::stdout().is_terminal();
+    let dashboard =
+        !headless && std::io::stdout().is_terminal() && !ahcmon::output::file::stdout_taken();
     let alerts: Option<ConnSpec> = alerts.map(str::parse).transpose()?;
     let mut opts = super::live::LiveOptions {
         link_timeout: std::time::Duration::from_secs_f64(in_range(

@@ -58,7 +58,8 @@ fn replay(
         files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
     }
     // The dashboard at a replay speed a person can follow; --fast (the default) is headless.
-    let dashboard = !headless && std::io::stdout().is_terminal();
+    let dashboard =
+        !headless && std::io::stdout().is_terminal() && !ahcmon::output::file::stdout_taken();
     // Declared before the dashboard: dropped after it, once the terminal is restored.
     let held = dashboard.then(super::log::hold);
     let mut ui = if dashboard {
@@ -304,7 +305,7 @@ fn write_plot(
 ) -> anyhow::Result<()> {
     if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
         let title = format!("ahcmon replay {}", file.display());
-        std::fs::write(p, rec.render(&title))
+        ahcmon::output::file::write_whole(p, rec.render(&title).as_bytes())
             .with_context(|| format!("cannot write {}", p.display()))?;
         tracing::info!("plot written to {}", p.display());
     }

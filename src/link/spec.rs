@@ -82,7 +82,6 @@ fn device_form(s: &str) -> Option<Result<ConnSpec, String>> {
         .rsplit_once(',')
         .filter(|_| !std::path::Path::new(s).exists());
     Some(match split {
-        Some((dev, _)) if dev.is_empty() => Err("no device".into()),
         Some((dev, baud)) => baud_rate(baud).map(|b| ConnSpec::Serial(dev.to_string(), b)),
         None => Ok(ConnSpec::Serial(s.to_string(), DEFAULT_BAUD)),
     })

@@ -7,6 +7,7 @@
 //! (`unknown_id`) — sliding into it would lose the frames after it (its length is known);
 //! a record cut off by the end of the file is `truncated`.
 
+use crate::output::file::OutputFile;
 use crate::protocol::MavMessage;
 use crate::protocol::frame::{
     Frame, FrameCounters, MAGIC_V1, MAGIC_V2, Parsed, encode_v2, frame_len, parse,
@@ -220,9 +221,10 @@ pub struct TlogWriter<W: Write> {
     pub records: u64,
 }
 
-impl TlogWriter<BufWriter<File>> {
+impl TlogWriter<BufWriter<OutputFile>> {
+    /// The tlog at `path` (`-`: standard output), replaced when its first record is written.
     pub fn create(path: &Path) -> io::Result<Self> {
-        Ok(Self::new(BufWriter::new(File::create(path)?)))
+        Ok(Self::new(BufWriter::new(OutputFile::open(path)?)))
     }
 }
 

@@ -5,15 +5,16 @@
 //! once) but not emptied: an existing file is replaced in place when the run writes its first
 //! line, or at its end ([`Outputs::finish`]) if it wrote none. A run that stops on an error
 //! before either (an input that is not a log, an empty one) leaves the file as it was. Not a
-//! rename: a live run's lines are in the named file as they are made (`tail -f`).
+//! rename: a live run's lines are in the named file as they are made (`tail -f`). `-` is
+//! standard output ([`crate::output::file`]).
 
 use crate::diagnose::vehicle::Decision;
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::output::Sink;
+pub use crate::output::file::OutputFile;
 use crate::sim::vehicle::VehicleSample;
 use crate::telemetry::Profile;
 use serde::Serialize;
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
@@ -23,66 +24,6 @@ pub struct JsonlWriter<W: Write> {
     /// The file's name, for its write errors (a full disk said only "No space left on device",
     /// not whether the decisions or the estimates were lost).
     name: Option<String>,
-}
-
-/// A file opened for writing without emptying it: emptied before its first byte is written,
-/// or by [`OutputFile::empty`] (see the module note).
-#[derive(Debug)]
-pub struct OutputFile {
-    file: File,
-    emptied: bool,
-    /// The file this run created (it did not exist): removed when the run ends without
-    /// writing or emptying it (it stopped on an error).
-    created: Option<std::path::PathBuf>,
-}
-
-impl OutputFile {
-    /// Open (create if missing) without truncating; the error names the file.
-    pub fn open(path: &Path) -> std::io::Result<Self> {
-        let existed = std::fs::symlink_metadata(path).is_ok();
-        let file = std::fs::OpenOptions::new()
-            .append(true)
-            .create(true)
-            .open(path)
-            .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
-        Ok(Self {
-            file,
-            emptied: false,
-            created: (!existed).then(|| path.to_path_buf()),
-        })
-    }
-
-    /// Empty the file unless done already (a device or a pipe has nothing to empty).
-    pub fn empty(&mut self) -> std::io::Result<()> {
-        if !self.emptied {
-            if self.file.metadata()?.is_file() {
-                self.file.set_len(0)?;
-            }
-            self.emptied = true;
-        }
-        Ok(())
-    }
-}
-
-impl Drop for OutputFile {
-    fn drop(&mut self) {
-        if let (false, Some(path)) = (self.emptied, &self.created)
-            && self.file.metadata().is_ok_and(|m| m.len() == 0)
-        {
-            let _ = std::fs::remove_file(path);
-        }
-    }
-}
-
-impl Write for OutputFile {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.empty()?;
-        self.file.write(buf)
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        self.file.flush()
-    }
 }
 
 /// A JSON-lines output file.
@@ -366,7 +307,7 @@ impl Outputs {
             use std::io::Write as _;
             // The echo is a convenience copy (the decisions file keeps every record): if the
             // terminal or pipe is gone, stop echoing rather than fail.
-            if writeln!(std::io::stdout(), "{}", describe(d)).is_err() {
+            if writeln!(crate::output::file::for_people(), "{}", describe(d)).is_err() {
                 self.echo = false;
             }
         }

@@ -3,6 +3,7 @@
 
 pub mod alerts;
 pub mod dashboard;
+pub mod file;
 pub mod jsonl;
 pub mod matrix;
 pub mod summary;

@@ -1,0 +1,109 @@
+//! The habits of the MAVLink world's command lines, through the binary: `-` for standard
+//! output on every output flag.
+
+mod common;
+
+use common::ahcmon;
+use serde_json::Value;
+
+fn sitl_log() -> String {
+    common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog")
+        .display()
+        .to_string()
+}
+
+/// `--decisions -` streams the decisions' JSON lines to standard output, the same lines as a
+/// file gets; the lines for a person (decisions, summary) go to standard error instead.
+#[test]
+fn decisions_to_stdout_are_the_file_s_lines_and_people_s_text_moves_to_stderr() {
+    let log = sitl_log();
+    let dir = common::temp_dir("habits_stdout");
+    let file = dir.join("d.jsonl");
+    let (code, to_file_out, _) = ahcmon(&["replay", &log, "--decisions", file.to_str().unwrap()]);
+    assert_eq!(code, 0);
+    let (code, out, err) = ahcmon(&["replay", &log, "--decisions", "-"]);
+    assert_eq!(code, 0, "{err}");
+    let from_file = std::fs::read_to_string(&file).unwrap();
+    assert!(from_file.lines().count() >= 5, "{from_file}");
+    assert_eq!(out, from_file);
+    for line in out.lines() {
+        let v: Value = serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}"));
+        assert!(v["event"].is_string(), "{line}");
+    }
+    // What a person reads is the same text, on stderr now.
+    let people: Vec<&str> = to_file_out
+        .lines()
+        .filter(|l| l.starts_with("t="))
+        .collect();
+    assert_eq!(people.len(), out.lines().count());
+    for l in &people {
+        assert!(err.contains(l), "{l} not on stderr");
+    }
+    assert!(err.contains("replayed "), "{err}");
+}
+
+/// Every output flag takes `-`: a plot and a simulated tlog come out on standard output whole
+/// (the tlog byte for byte the file's);
+/// two outputs cannot both have it.
+#[test]
+fn every_output_flag_takes_a_dash_and_only_one_may() {
+    let log = sitl_log();
+    let (code, out, err) = ahcmon(&["replay", &log, "--plot", "-", "-q"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("<?xml") && out.trim_end().ends_with("</svg>"));
+
+    let dir = common::temp_dir("habits_tlog");
+    let tlog = std::process::Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .args(["sim", "--scenario", "quad-x-motor2-loe", "--tlog", "-"])
+        .output()
+        .unwrap();
+    assert!(tlog.status.success());
+    let path = dir.join("to_file.tlog");
+    let (code, _, err) = ahcmon(&[
+        "sim",
+        "--scenario",
+        "quad-x-motor2-loe",
+        "--tlog",
+        path.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let file = std::fs::read(&path).unwrap();
+    assert!(file.len() > 100_000);
+    assert!(tlog.stdout == file, "the tlog on stdout is not the file's");
+    // sim's own report goes to stderr.
+    assert!(
+        String::from_utf8_lossy(&tlog.stderr).contains("40 s of quad-x as sysid 1"),
+        "{}",
+        String::from_utf8_lossy(&tlog.stderr)
+    );
+
+    let (code, _, err) = ahcmon(&["replay", &log, "--decisions", "-", "--estimates", "-"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("--decisions and --estimates both name standard output (-)"),
+        "{err}"
+    );
+}
+
+/// A reader that stops early (`| head -1`) ends the run's output quietly, not as an error.
+#[test]
+fn a_reader_that_stops_early_is_no_error() {
+    use std::io::Read;
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ahcmon"))
+        .args(["replay", &sitl_log(), "--estimates", "-", "-q"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = [0u8; 64];
+    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+    // stdout is closed here.
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(first.starts_with(b"{\"t\":"));
+}
