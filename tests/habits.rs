@@ -1,6 +1,9 @@
 //! The habits of the MAVLink world's command lines, through the binary: `-` for standard
 //! output on every output flag.
 
+// Test code: a failed unwrap is the failure report.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
 mod common;
 
 use common::ahcmon;
