@@ -71,6 +71,28 @@ pub enum Command {
     /// quotes one). The truth format and the scoring rules: docs/results.md, "Dataset
     /// benchmark".
     Benchmark(BenchmarkArgs),
+    /// Print a shell's completion script for ahcmon (bash, zsh, fish, elvish, powershell).
+    /// bash: `ahcmon completions bash > ~/.local/share/bash-completion/completions/ahcmon`;
+    /// zsh: into a directory of your $fpath as `_ahcmon`; fish:
+    /// `ahcmon completions fish > ~/.config/fish/completions/ahcmon.fish`.
+    Completions(CompletionsArgs),
+    /// Print the manual page (roff): `ahcmon man > ahcmon.1; man -l ahcmon.1`, or with --dir
+    /// one page per command (ahcmon.1, ahcmon-replay.1, ...) for a MANPATH.
+    Man(ManArgs),
+}
+
+#[derive(clap::Args)]
+pub struct CompletionsArgs {
+    /// The shell.
+    #[arg(value_enum)]
+    pub shell: clap_complete::Shell,
+}
+
+#[derive(clap::Args)]
+pub struct ManArgs {
+    /// Write every command's page into this directory instead of the main page to stdout.
+    #[arg(long, value_name = "DIR")]
+    pub dir: Option<PathBuf>,
 }
 
 impl Command {
@@ -98,7 +120,7 @@ impl Command {
             }
             Command::Calibrate(a) => vec![("--output", Some(a.output.as_path()))],
             Command::Benchmark(a) => vec![("--json", a.json.as_deref())],
-            Command::Thresholds(_) => vec![],
+            Command::Thresholds(_) | Command::Completions(_) | Command::Man(_) => vec![],
         };
         flags
             .into_iter()

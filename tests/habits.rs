@@ -110,3 +110,126 @@ fn a_reader_that_stops_early_is_no_error() {
     );
     assert!(first.starts_with(b"{\"t\":"));
 }
+
+/// The completion script of `shell`, written to a file.
+fn completion_script(shell: &str) -> std::path::PathBuf {
+    let (code, script, err) = ahcmon(&["completions", shell]);
+    assert_eq!(code, 0, "{err}");
+    let path = common::temp_dir("habits_completions").join(format!("ahcmon.{shell}"));
+    std::fs::write(&path, script).unwrap();
+    path
+}
+
+/// Every shell's script names every command (they are generated from the same definition).
+#[test]
+fn completion_scripts_name_every_command() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let script = std::fs::read_to_string(completion_script(shell)).unwrap();
+        for command in ["replay", "monitor", "demo", "calibrate", "benchmark", "man"] {
+            assert!(script.contains(command), "{shell}: no {command}");
+        }
+        assert!(script.contains("decisions"), "{shell}: no --decisions");
+    }
+    let (code, _, err) = ahcmon(&["completions", "tcsh"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("possible values"), "{err}");
+}
+
+/// What a shell completes, as it would at the prompt: `shell -c` with the script loaded.
+fn complete_in(shell: &str, program: &str) -> String {
+    let out = std::process::Command::new(shell)
+        .args(["-c", program])
+        .output()
+        .unwrap_or_else(|e| panic!("{shell} is needed for this test: {e}"));
+    assert!(
+        out.status.success(),
+        "{shell}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// bash completes the commands and a command's flags from the script.
+#[test]
+fn bash_completes_commands_and_flags() {
+    let script = completion_script("bash");
+    let complete = |words: &str| {
+        complete_in(
+            "bash",
+            &format!(
+                "source '{}'; COMP_WORDS=({words}); COMP_CWORD=$((${{#COMP_WORDS[@]}} - 1)); \
+                 _ahcmon ahcmon \"${{COMP_WORDS[-1]}}\" \"${{COMP_WORDS[-2]}}\"; \
+                 printf '%s\\n' \"${{COMPREPLY[@]}}\"",
+                script.display()
+            ),
+        )
+    };
+    assert_eq!(complete("ahcmon rep").trim(), "replay");
+    let flags = complete("ahcmon replay --dec");
+    assert_eq!(
+        flags.trim(),
+        "--decisions --decimate".replace(' ', "\n").trim()
+    );
+}
+
+/// zsh loads the script as a completion function; fish completes from it (`complete -C`).
+/// Needs zsh and fish (Debian: apt-get install zsh fish): `cargo test --release --test habits
+/// -- --ignored`.
+#[test]
+#[ignore = "needs zsh and fish installed"]
+fn zsh_and_fish_load_and_complete() {
+    let zsh = completion_script("zsh");
+    let loaded = complete_in(
+        "zsh",
+        &format!(
+            "autoload -U compinit && compinit -u -D; source '{}'; whence -w _ahcmon",
+            zsh.display()
+        ),
+    );
+    assert!(loaded.contains("_ahcmon: function"), "{loaded}");
+    let fish = completion_script("fish");
+    let got = complete_in(
+        "fish",
+        &format!("source '{}'; complete -C 'ahcmon rep'", fish.display()),
+    );
+    assert!(got.lines().any(|l| l.starts_with("replay")), "{got}");
+    let got = complete_in(
+        "fish",
+        &format!(
+            "source '{}'; complete -C 'ahcmon replay --dec'",
+            fish.display()
+        ),
+    );
+    assert!(got.contains("--decisions"), "{got}");
+}
+
+/// The manual page renders (man -l) with every command; --dir writes one page per command.
+#[test]
+fn the_manual_page_renders_and_names_every_command() {
+    let dir = common::temp_dir("habits_man");
+    let (code, page, err) = ahcmon(&["man"]);
+    assert_eq!(code, 0, "{err}");
+    let file = dir.join("ahcmon.1");
+    std::fs::write(&file, page).unwrap();
+    let shown = std::process::Command::new("man")
+        .arg("-l")
+        .arg(&file)
+        .env("MANPAGER", "cat")
+        .env("MANWIDTH", "100")
+        .output()
+        .expect("man (man-db) to render the page");
+    let text = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        shown.status.success() && text.contains("SYNOPSIS"),
+        "{text}"
+    );
+    for command in ["replay", "monitor", "completions"] {
+        assert!(text.contains(command), "no {command} in {text}");
+    }
+    let pages = dir.join("pages");
+    let (code, _, err) = ahcmon(&["man", "--dir", pages.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    for page in ["ahcmon.1", "ahcmon-replay.1", "ahcmon-monitor.1"] {
+        assert!(pages.join(page).is_file(), "no {page}");
+    }
+}
