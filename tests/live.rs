@@ -403,7 +403,7 @@ fn demo_alerts_reach_a_pymavlink_listener() {
     assert!(
         texts
             .iter()
-            .any(|t| t.starts_with("AHC swash2 ") && t.len() <= 50),
+            .any(|t| t.starts_with("ahcmon: swash2 ") && t.len() <= 50),
         "{texts:?}"
     );
     let names = seen["named_value_float"].as_array().unwrap();
@@ -423,6 +423,16 @@ fn demo_alerts_reach_a_pymavlink_listener() {
 /// MAVProxy (tests/reference/requirements-nodeps.txt) listening on `masters` and sending to `out` (all on
 /// 127.0.0.1), its state in `dir`; returns once it has had time to start listening.
 fn mavproxy(masters: &[u16], out: u16, dir: &Path) -> std::process::Child {
+    mavproxy_with(masters, out, dir, &[], Stdio::null())
+}
+
+fn mavproxy_with(
+    masters: &[u16],
+    out: u16,
+    dir: &Path,
+    extra: &[&str],
+    console: Stdio,
+) -> std::process::Child {
     let py = common::python();
     let mavproxy = py.with_file_name("mavproxy.py");
     assert!(
@@ -440,8 +450,9 @@ fn mavproxy(masters: &[u16], out: u16, dir: &Path) -> std::process::Child {
         .arg(format!("--out=udp:127.0.0.1:{out}"))
         .arg("--non-interactive")
         .arg(format!("--state-basedir={}", dir.display()))
+        .args(extra)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
+        .stdout(console)
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
@@ -477,8 +488,44 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
         .map(|s| s[1].as_str().unwrap())
         .collect();
     assert!(
-        texts.iter().any(|t| t.starts_with("AHC swash2 ")),
+        texts.iter().any(|t| t.starts_with("ahcmon: swash2 ")),
         "MAVProxy did not forward our STATUSTEXT: {seen}"
+    );
+}
+
+/// MAVProxy's own console shows our alerts with `--target-system=1 --target-component=0` (the
+/// vehicle's system, any of its components; by default it follows the first HEARTBEAT's
+/// component, the autopilot's, and shows no other's STATUSTEXT). It prints every STATUSTEXT as
+/// `AP: ...`, so the text names its sender: `AP: ahcmon: swash2 LOE ...`.
+#[test]
+fn mavproxy_s_console_shows_our_alerts_as_ours() {
+    let (master, out_port) = (free_udp_port(), free_udp_port());
+    let state = common::temp_dir("live_mavproxy_console");
+    let console = state.join("console.txt");
+    let mut proxy = mavproxy_with(
+        &[master],
+        out_port,
+        &state,
+        &["--target-system=1", "--target-component=0"],
+        std::fs::File::create(&console).unwrap().into(),
+    );
+    let demo = Command::new(bin())
+        .args(["demo", "--headless", "--speed", "4", "--alerts"])
+        .arg(format!("udpout:127.0.0.1:{master}"))
+        .output()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    let _ = proxy.kill();
+    let _ = proxy.wait();
+    assert!(
+        demo.status.success(),
+        "{}",
+        String::from_utf8_lossy(&demo.stderr)
+    );
+    let shown = std::fs::read_to_string(&console).unwrap();
+    assert!(
+        shown.lines().any(|l| l.contains("AP: ahcmon: swash2 LOE")),
+        "MAVProxy's console: {shown}"
     );
 }
 

@@ -93,7 +93,12 @@ pub struct Alerts {
     pub frames_unsent: u64,
 }
 
-/// `AHC swash2 LOE 41% UKF+ESMF`: what the planner shows (≤ 50 characters).
+/// What starts each STATUSTEXT: whose it is. Planners label a STATUSTEXT by their own rules
+/// (MAVProxy's console prints every one it shows as `AP: ...`, the autopilot's), so the text
+/// itself names its sender.
+pub const TEXT_PREFIX: &str = "ahcmon: ";
+
+/// `ahcmon: swash2 LOE 41% UKF+ESMF`: what the planner shows (≤ 50 characters).
 pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
     let who = d.actuator.as_deref().unwrap_or("");
     let by: Vec<&str> = d
@@ -109,8 +114,8 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
     // The actuator's name is what gives way when the text is too long, not the class.
     let fit = |what: &str, by: &str| {
         let tail = format!(" {what} {by}");
-        let room = TEXT_BYTES.saturating_sub("AHC ".len() + tail.trim_end().len());
-        format!("AHC {}{}", cut_bytes(who, room), tail.trim_end())
+        let room = TEXT_BYTES.saturating_sub(TEXT_PREFIX.len() + tail.trim_end().len());
+        format!("{TEXT_PREFIX}{}{}", cut_bytes(who, room), tail.trim_end())
     };
     let (sev, text) = match d.event {
         Event::Fault | Event::Changed => {
@@ -141,10 +146,13 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
         Event::Cleared => (MavSeverity::MAV_SEVERITY_NOTICE, fit("cleared", "")),
         // Statements, not faults: the dashboard, summary and decisions carry them.
         Event::ExcitationLow | Event::Suspect | Event::SuspectCleared => return None,
-        Event::FilterReset => (MavSeverity::MAV_SEVERITY_WARNING, "AHC filter reset".into()),
+        Event::FilterReset => (
+            MavSeverity::MAV_SEVERITY_WARNING,
+            format!("{TEXT_PREFIX}filter reset"),
+        ),
         Event::CannotEstimate => (
             MavSeverity::MAV_SEVERITY_WARNING,
-            "AHC cannot estimate".into(),
+            format!("{TEXT_PREFIX}cannot estimate"),
         ),
         // Not a fault, but the planner should know the actuator is not monitored.
         Event::CannotJudge => (MavSeverity::MAV_SEVERITY_WARNING, fit("cannot judge", "")),
@@ -152,7 +160,7 @@ pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
         // The planner hears both senders itself; its operator should know ours is unsure.
         Event::Contaminated => (
             MavSeverity::MAV_SEVERITY_WARNING,
-            "AHC two senders of this id: estimates unsure".into(),
+            format!("{TEXT_PREFIX}two senders of this id: estimates unsure"),
         ),
     };
     Some((sev, cut_bytes(text.trim(), TEXT_BYTES).to_string()))

@@ -11,14 +11,14 @@ fn statustext_fits_and_names_the_actuator() {
     d.gamma = Some(0.59);
     d.filters = vec!["mit-ukf", "mit-esmf"];
     let (sev, text) = statustext(&d).unwrap();
-    assert_eq!(text, "AHC swash2 LOE 41% UKF+ESMF");
+    assert_eq!(text, "ahcmon: swash2 LOE 41% UKF+ESMF");
     assert_eq!(sev, MavSeverity::MAV_SEVERITY_CRITICAL);
     // A long name gives way, the class and the filters stay; bytes, not characters, and
     // never half a character.
     d.actuator = Some("a_very_long_actuator_name_that_goes_on_and_on".into());
     let (_, text) = statustext(&d).unwrap();
     assert!(text.len() <= 50, "{text}");
-    assert!(text.starts_with("AHC a_very_long") && text.ends_with(" LOE 41% UKF+ESMF"));
+    assert!(text.starts_with("ahcmon: a_very_long") && text.ends_with(" LOE 41% UKF+ESMF"));
     d.actuator = Some("höhenruder_links_äußeres_ruder_über_alles".into());
     let (_, text) = statustext(&d).unwrap();
     assert!(
@@ -35,14 +35,14 @@ fn statustext_fits_and_names_the_actuator() {
     d.delta = Some(-0.001);
     d.deviation = Some(0.121);
     let (sev, text) = statustext(&d).unwrap();
-    assert_eq!(text, "AHC motor5 bias +12% UKF+ESMF");
+    assert_eq!(text, "ahcmon: motor5 bias +12% UKF+ESMF");
     assert_eq!(sev, MavSeverity::MAV_SEVERITY_ERROR);
     // An actuator the model cannot judge (G2) is no fault, but the planner is told it is not
     // monitored; the other statements stay off the planner.
     let mut d = Decision::monitor(1.0, 1, Event::CannotJudge, "");
     d.actuator = Some("rudder".into());
     let (sev, text) = statustext(&d).unwrap();
-    assert_eq!(text, "AHC rudder cannot judge");
+    assert_eq!(text, "ahcmon: rudder cannot judge");
     assert_eq!(sev, MavSeverity::MAV_SEVERITY_WARNING);
     d.event = Event::ExcitationLow;
     assert!(statustext(&d).is_none());
@@ -133,13 +133,13 @@ fn a_loss_is_told_again_at_its_new_size() {
         let queued = a.text_queue.values().flatten().map(|q| q.text.clone());
         sent.chain(queued).collect()
     };
-    assert_eq!(texts(&a), vec!["AHC swash2 LOE 16% UKF"]);
+    assert_eq!(texts(&a), vec!["ahcmon: swash2 LOE 16% UKF"]);
     est[1].gamma = 0.69;
     // Too soon after the last text: not yet.
     a.on_estimates(45.0, 1, &[&est, &est, &est], &p);
     assert_eq!(texts(&a).len(), 1);
     a.on_estimates(47.5, 1, &[&est, &est, &est], &p);
-    assert_eq!(texts(&a)[1], "AHC swash2 LOE 31% UKF");
+    assert_eq!(texts(&a)[1], "ahcmon: swash2 LOE 31% UKF");
     // Within 10 points of the new size: nothing more.
     est[1].gamma = 0.62;
     a.on_estimates(60.0, 1, &[&est, &est, &est], &p);
@@ -215,7 +215,7 @@ fn a_full_text_queue_drops_the_least_severe_never_a_fault() {
     let q = &a.text_queue[&1];
     assert_eq!(q.len(), TEXT_QUEUE);
     assert!(
-        q.iter().any(|x| x.text.starts_with("AHC motor2 LOE")),
+        q.iter().any(|x| x.text.starts_with("ahcmon: motor2 LOE")),
         "{q:?}"
     );
     // Faults alone grow the queue past the soft cap rather than being dropped (each text
@@ -256,7 +256,7 @@ fn a_flapping_actuator_s_last_queued_text_is_its_state_now() {
         .unwrap();
     assert!(last_motor1.text.contains("cleared"), "{q:?}");
     assert!(
-        q.iter().any(|x| x.text.starts_with("AHC motor2 stuck")),
+        q.iter().any(|x| x.text.starts_with("ahcmon: motor2 stuck")),
         "{q:?}"
     );
     // Sent in order, the planner's last text about motor1 says it cleared.
@@ -449,11 +449,11 @@ fn a_text_the_planner_already_has_for_the_actuator_is_not_repeated() {
     assert_eq!(
         texts,
         [
-            "AHC motor5 stuck UKF",
-            "AHC motor5 cleared",
-            "AHC motor5 stuck UKF",
-            "AHC motor6 stuck UKF",
-            "AHC motor6 stuck UKF"
+            "ahcmon: motor5 stuck UKF",
+            "ahcmon: motor5 cleared",
+            "ahcmon: motor5 stuck UKF",
+            "ahcmon: motor6 stuck UKF",
+            "ahcmon: motor6 stuck UKF"
         ]
     );
 }
