@@ -111,11 +111,18 @@ impl Command {
                 ]);
                 f
             }
-            Command::Monitor(a) => common(&a.run.output),
+            Command::Monitor(a) => {
+                let mut f = common(&a.run.output);
+                f.push(("--summary", a.run.summary.as_deref()));
+                f
+            }
             Command::Demo(a) => common(&a.output),
             Command::Replay(a) => {
                 let mut f = common(&a.run.output);
-                f.push(("--plot", a.plot.as_deref()));
+                f.extend([
+                    ("--plot", a.plot.as_deref()),
+                    ("--summary", a.run.summary.as_deref()),
+                ]);
                 f
             }
             Command::Calibrate(a) => vec![("--output", Some(a.output.as_path()))],
@@ -375,6 +382,11 @@ pub struct RunArgs {
     /// read unchecked. A file, so that the key is never on a command line.
     #[arg(long, value_name = "FILE")]
     pub signing_key_file: Option<PathBuf>,
+    /// Also write the end-of-run summary as one JSON document (`-`: standard output): the
+    /// link's and each vehicle's counters, and per actuator its fault count, state and each
+    /// filter's final gamma and delta with bounds.
+    #[arg(long, value_name = "FILE")]
+    pub summary: Option<PathBuf>,
 }
 
 /// The JSON-lines files of a run (`replay`, `monitor`, `demo`, `sim`, `eval`).

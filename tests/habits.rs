@@ -233,3 +233,60 @@ fn the_manual_page_renders_and_names_every_command() {
         assert!(pages.join(page).is_file(), "no {page}");
     }
 }
+
+/// `--summary FILE`: the end-of-run summary as JSON, the same counts and states as the text
+/// summary and the decisions file.
+#[test]
+fn the_summary_as_json_agrees_with_the_decisions_and_the_text() {
+    let dir = common::temp_dir("habits_summary");
+    let (summary, decisions) = (dir.join("s.json"), dir.join("d.jsonl"));
+    let (code, text, err) = ahcmon(&[
+        "replay",
+        &sitl_log(),
+        "--summary",
+        summary.to_str().unwrap(),
+        "--decisions",
+        decisions.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let ds: Vec<Value> = std::fs::read_to_string(&decisions)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(doc["version"], 1);
+    assert_eq!(doc["decisions"].as_u64().unwrap() as usize, ds.len());
+    let vehicle = &doc["vehicles"][0];
+    assert_eq!(vehicle["sysid"], 1);
+    assert_eq!(vehicle["type"], "quadrotor");
+    assert_eq!(vehicle["stage"], "estimating");
+    let actuators = vehicle["actuators"].as_array().unwrap();
+    assert_eq!(actuators.len(), 4);
+    for a in actuators {
+        let name = a["name"].as_str().unwrap();
+        let faults = ds
+            .iter()
+            .filter(|d| d["actuator"] == name && d["event"] == "fault")
+            .count();
+        assert_eq!(a["faults"].as_u64().unwrap() as usize, faults, "{name}");
+        let state = a["state"].as_str().unwrap();
+        assert!(
+            text.lines().any(|l| l.contains(name) && l.ends_with(state)),
+            "{name}: {state} not in the text summary"
+        );
+        for filter in ["mit-ukf", "mit-esmf", "set"] {
+            let e = &a["estimates"][filter];
+            let [lo, hi] = [0, 1].map(|k| e["gamma_bounds"][k].as_f64().unwrap());
+            assert!(lo <= hi, "{name} {filter}");
+        }
+    }
+    // The faulted motor: one fault, cleared after its removal (the log's truth).
+    assert_eq!(actuators[0]["faults"], 1);
+    assert!(
+        actuators[0]["state"]
+            .as_str()
+            .unwrap()
+            .starts_with("cleared at")
+    );
+}

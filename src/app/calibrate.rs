@@ -40,6 +40,7 @@ fn calibrate(
         calibrate_until: Some(until),
         calibrate_s: ahcmon::pipeline::PipelineConfig::default().calibrate_s,
         signing_key_file: None,
+        summary: None,
     };
     let mut monitor = Monitor::new(args.pipeline_config()?);
     // Echoed: the pipeline's progress and warnings (a short stretch, a poor fit, a profile of

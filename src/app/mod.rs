@@ -107,7 +107,30 @@ impl RunArgs {
                 .as_deref()
                 .and_then(|p| file_input(p, ahcmon::telemetry::profile::BUILTIN)),
         );
-        self.output.create(&inputs, more)
+        let mut more = more.to_vec();
+        more.push(("--summary", self.summary.as_deref()));
+        if let Some(p) = &self.summary {
+            // Fail now rather than after a long run; the file is replaced only at the end.
+            ahcmon::output::file::OutputFile::open(p)
+                .with_context(|| format!("cannot write {}", p.display()))?;
+        }
+        self.output.create(&inputs, &more)
+    }
+
+    /// `--summary`: the end-of-run summary as JSON.
+    pub fn write_summary(
+        &self,
+        monitor: &ahcmon::monitor::Monitor,
+        frames: &ahcmon::protocol::FrameCounters,
+        decisions: &[ahcmon::diagnose::vehicle::Decision],
+    ) -> anyhow::Result<()> {
+        let Some(p) = &self.summary else {
+            return Ok(());
+        };
+        let doc = ahcmon::output::summary_json::summary_json(monitor, frames, decisions);
+        let text = serde_json::to_string_pretty(&doc)? + "\n";
+        ahcmon::output::file::write_whole(p, text.as_bytes())
+            .with_context(|| format!("cannot write {}", p.display()))
     }
 }
 

@@ -72,6 +72,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         calibrate_until: None,
         calibrate_s: ahcmon::pipeline::PipelineConfig::default().calibrate_s,
         signing_key_file: None,
+        summary: None,
     };
     // Headless, the monitor stops once the simulated flight has ended; with the
     // dashboard the operator looks on until q.
@@ -281,6 +282,7 @@ fn monitor(
         }
     };
     out!("{}", summary::render(&monitor, &counters.link, &files.seen));
+    args.write_summary(&monitor, &counters.link, &files.seen)?;
     if counters.backpressure_drops > 0 {
         outln!(
             "{} frames dropped: the estimators fell behind",

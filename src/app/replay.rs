@@ -177,6 +177,7 @@ fn replay(
         "{}",
         summary::render(&monitor, &reader.counters, &files.seen)
     );
+    args.write_summary(&monitor, &reader.counters, &files.seen)?;
     outln!(
         "replayed {} in {:.2} s",
         file.display(),
@@ -276,6 +277,7 @@ fn replay_own_log(
         "{}",
         summary::render(&monitor, &report.counters, &files.seen)
     );
+    args.write_summary(&monitor, &report.counters, &files.seen)?;
     for note in &report.notes {
         outln!("log: {note}");
     }

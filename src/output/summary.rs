@@ -150,84 +150,7 @@ pub fn render(
             "faults",
         );
         for (j, a) in profile.actuators.iter().enumerate() {
-            // Fault episodes (not every decision: a healthy motor with six `excitation_low`
-            // read "6 decisions, healthy").
-            let n = decisions
-                .iter()
-                .filter(|d| {
-                    d.sysid == *sysid
-                        && d.actuator.as_deref() == Some(a.name.as_str())
-                        && d.event == crate::diagnose::vehicle::Event::Fault
-                })
-                .count();
-            // With no fault in force: "healthy", or when its fault was cleared, since when
-            // (the estimates may still be on their way back: quad + motor 1 read gamma 0.87
-            // [0.85, 0.89] a while after its clearing, beside a bare "healthy").
-            // With the kind and onset of the fault that cleared: an operator reading the summary
-            // of a log learnt only that something had cleared.
-            use crate::diagnose::vehicle::Event;
-            let mut episode: Option<(f64, Option<FaultClass>)> = None;
-            let mut cleared = None;
-            for d in decisions
-                .iter()
-                .filter(|d| d.sysid == *sysid && d.actuator.as_deref() == Some(a.name.as_str()))
-            {
-                match d.event {
-                    Event::Fault => {
-                        episode = Some((d.t, d.class));
-                        cleared = None;
-                    }
-                    Event::Changed => {
-                        if let Some(e) = episode.as_mut() {
-                            e.1 = d.class;
-                        }
-                        cleared = None;
-                    }
-                    Event::Cleared => cleared = Some(d.t),
-                    _ => {}
-                }
-            }
-            // "cleared at t=57.22 s (loss_of_effectiveness from t=45.22 s; <also>)".
-            let cleared_with = |also: Option<String>| {
-                cleared.map(|t| {
-                    let mut notes: Vec<String> = episode
-                        .map(|(onset, class)| {
-                            format!(
-                                "{} from t={onset:.2} s",
-                                class.map_or("fault", |c| c.as_str())
-                            )
-                        })
-                        .into_iter()
-                        .collect();
-                    notes.extend(also);
-                    if notes.is_empty() {
-                        format!("cleared at t={t:.2} s")
-                    } else {
-                        format!("cleared at t={t:.2} s ({})", notes.join("; "))
-                    }
-                })
-            };
-            // A fault in force at a reboot is not cleared by it.
-            let at_reboot = p.before_reboot.and_then(|b| b.active[j]);
-            let state = match (p.active[j], at_reboot, old_boot) {
-                (Some(c), _, _) => c.as_str().to_string(),
-                (None, Some(c), Some(_)) => {
-                    format!("{} at the reboot, not judged since", c.as_str())
-                }
-                // (A clearing after a fault at the reboot is the new boot's own.)
-                (None, Some(c), None) => {
-                    cleared_with(Some(format!("{} before the reboot", c.as_str()))).unwrap_or_else(
-                        || format!("healthy since the reboot ({} before)", c.as_str()),
-                    )
-                }
-                (None, None, _) if p.health[j] == Health::Suspect => {
-                    "suspect (evidence short of a fault: see its decision)".into()
-                }
-                (None, None, _) if p.health[j] == Health::CannotJudge => {
-                    "cannot judge (the model does not explain its axes: see its decision)".into()
-                }
-                (None, None, _) => cleared_with(None).unwrap_or_else(|| "healthy".into()),
-            };
+            let (n, state) = actuator_state(p, *sysid, j, &a.name, decisions);
             for (f, name) in FILTER_NAMES.iter().enumerate() {
                 let e = est[f][j];
                 // A set filter's bound still at its a priori box says nothing: said instead.
@@ -272,4 +195,90 @@ pub fn render(
         }
     }
     s
+}
+
+/// Actuator `j`'s fault episodes (not every decision: a healthy motor with six
+/// `excitation_low` read "6 decisions, healthy") and its state at the end, in words.
+pub(crate) fn actuator_state(
+    p: &crate::pipeline::VehiclePipeline,
+    sysid: u8,
+    j: usize,
+    name: &str,
+    decisions: &[crate::diagnose::vehicle::Decision],
+) -> (usize, String) {
+    let old_boot = p.before_reboot.filter(|b| !b.estimated_since);
+    let n = decisions
+        .iter()
+        .filter(|d| {
+            d.sysid == sysid
+                && d.actuator.as_deref() == Some(name)
+                && d.event == crate::diagnose::vehicle::Event::Fault
+        })
+        .count();
+    // With no fault in force: "healthy", or when its fault was cleared, since when
+    // (the estimates may still be on their way back: quad + motor 1 read gamma 0.87
+    // [0.85, 0.89] a while after its clearing, beside a bare "healthy").
+    // With the kind and onset of the fault that cleared: an operator reading the summary
+    // of a log learnt only that something had cleared.
+    use crate::diagnose::vehicle::Event;
+    let mut episode: Option<(f64, Option<FaultClass>)> = None;
+    let mut cleared = None;
+    for d in decisions
+        .iter()
+        .filter(|d| d.sysid == sysid && d.actuator.as_deref() == Some(name))
+    {
+        match d.event {
+            Event::Fault => {
+                episode = Some((d.t, d.class));
+                cleared = None;
+            }
+            Event::Changed => {
+                if let Some(e) = episode.as_mut() {
+                    e.1 = d.class;
+                }
+                cleared = None;
+            }
+            Event::Cleared => cleared = Some(d.t),
+            _ => {}
+        }
+    }
+    // "cleared at t=57.22 s (loss_of_effectiveness from t=45.22 s; <also>)".
+    let cleared_with = |also: Option<String>| {
+        cleared.map(|t| {
+            let mut notes: Vec<String> = episode
+                .map(|(onset, class)| {
+                    format!(
+                        "{} from t={onset:.2} s",
+                        class.map_or("fault", |c| c.as_str())
+                    )
+                })
+                .into_iter()
+                .collect();
+            notes.extend(also);
+            if notes.is_empty() {
+                format!("cleared at t={t:.2} s")
+            } else {
+                format!("cleared at t={t:.2} s ({})", notes.join("; "))
+            }
+        })
+    };
+    // A fault in force at a reboot is not cleared by it.
+    let at_reboot = p.before_reboot.and_then(|b| b.active[j]);
+    let state = match (p.active[j], at_reboot, old_boot) {
+        (Some(c), _, _) => c.as_str().to_string(),
+        (None, Some(c), Some(_)) => {
+            format!("{} at the reboot, not judged since", c.as_str())
+        }
+        // (A clearing after a fault at the reboot is the new boot's own.)
+        (None, Some(c), None) => cleared_with(Some(format!("{} before the reboot", c.as_str())))
+            .unwrap_or_else(|| format!("healthy since the reboot ({} before)", c.as_str())),
+        (None, None, _) if p.health[j] == Health::Suspect => {
+            "suspect (evidence short of a fault: see its decision)".into()
+        }
+        (None, None, _) if p.health[j] == Health::CannotJudge => {
+            "cannot judge (the model does not explain its axes: see its decision)".into()
+        }
+        (None, None, _) => cleared_with(None).unwrap_or_else(|| "healthy".into()),
+    };
+    (n, state)
 }
