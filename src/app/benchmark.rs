@@ -109,18 +109,19 @@ pub fn run(a: BenchmarkArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", json.display()))?;
     }
     let n: usize = sets.iter().map(|s| s.cases.len()).sum();
-    let mut progress = Progress::new(true);
+    let progress = Progress::new(true, "benchmark", n as u64);
     let mut done = 0;
     let mut runs = Vec::new();
     for truth in sets {
         let mut cases = Vec::new();
         for c in &truth.cases {
             done += 1;
-            progress.show(&format!("benchmark: [{done}/{n}] {}", c.file));
+            progress.message(&format!("[{done}/{n}] {}", c.file));
             let profile = c.profile.as_deref().map(Profile::resolve).transpose()?;
             cases.push(rayon::scope(|_| {
                 replay_case(&a.data.join(&c.file), c, profile, truth.calibrate_s)
             }));
+            progress.set(done as u64);
         }
         let scores: Vec<CaseScore> = cases.iter().map(|c| c.score.clone()).collect();
         runs.push(DatasetRun {

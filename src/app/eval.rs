@@ -132,12 +132,12 @@ fn eval(names: Vec<String>, json: bool, plot: Option<PathBuf>, seeds: u64) -> an
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create plot directory {}", dir.display()))?;
     }
-    let mut progress = Progress::new(true);
+    let progress = Progress::new(true, "eval", list.len() as u64 * seeds);
     let mut rows = vec![];
     for named in &list {
         let mut runs: Vec<Run> = vec![];
         for i in 0..seeds {
-            progress.show(&format!("eval: {} seed {}/{}", named.name, i + 1, seeds));
+            progress.step(&format!("{} seed {}/{}", named.name, i + 1, seeds));
             let keep = plot.is_some() && i == 0;
             runs.push(run_scenario(named, named.scenario.seed + i, keep)?);
         }

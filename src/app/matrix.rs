@@ -5,32 +5,24 @@ use super::Progress;
 use ahcmon::eval::matrix::{self, MatrixSpec};
 use ahcmon::output::matrix::render;
 use rayon::prelude::*;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 pub fn run(spec: MatrixSpec, json: bool) -> anyhow::Result<()> {
     let cases = matrix::cases(&spec)?;
     let started = std::time::Instant::now();
     let done = AtomicUsize::new(0);
-    let progress = Mutex::new(Progress::new(true));
     let n = cases.len();
+    let progress = Progress::new(true, "eval --matrix", n as u64);
     let results = cases
         .par_iter()
         .map(|c| {
             let r = matrix::run_case(c);
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if let Ok(mut p) = progress.lock() {
-                p.show(&format!(
-                    "eval --matrix: {k}/{n} flights, {:.0} s",
-                    started.elapsed().as_secs_f64()
-                ));
-            }
+            progress.step(&format!("{k}/{n} flights"));
             r
         })
         .collect::<Result<Vec<_>, _>>()?;
-    if let Ok(mut p) = progress.lock() {
-        p.clear();
-    }
+    progress.clear();
     let rows = matrix::report(&results);
     if json {
         let doc = serde_json::json!({ "report": rows, "cases": results });

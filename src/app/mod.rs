@@ -327,37 +327,52 @@ pub(crate) struct InputFileError {
 #[error("{0}")]
 pub(crate) struct UsageError(pub String);
 
-/// A one-line progress display on stderr, redrawn in place: only on a terminal, and not
-/// with `-q`.
+/// A progress bar on stderr with the time left (`indicatif`): only on a terminal, and not
+/// with `-q`. `total` counts what the work goes through (a log's bytes, flights, cases).
 pub(crate) struct Progress {
-    on: bool,
-    width: usize,
+    bar: indicatif::ProgressBar,
 }
 
 impl Progress {
     /// `wanted`: the caller shows no other progress (a dashboard).
-    pub(crate) fn new(wanted: bool) -> Self {
+    pub(crate) fn new(wanted: bool, what: &str, total: u64) -> Self {
         use std::io::IsTerminal;
-        Self {
-            on: wanted && std::io::stderr().is_terminal() && log::progress_enabled(),
-            width: 0,
+        let on = wanted && std::io::stderr().is_terminal() && log::progress_enabled();
+        let bar = if on {
+            indicatif::ProgressBar::new(total)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        let style = indicatif::ProgressStyle::with_template(
+            "{prefix}: {percent:>3}% [{bar:30}] {elapsed} elapsed, about {eta} left  {msg}",
+        )
+        .map(|s| s.progress_chars("#>-"));
+        if let Ok(style) = style {
+            bar.set_style(style);
         }
+        bar.set_prefix(what.to_string());
+        Self { bar }
     }
 
-    pub(crate) fn show(&mut self, text: &str) {
-        if self.on {
-            let pad = self.width.saturating_sub(text.chars().count());
-            self.width = self.width.max(text.chars().count());
-            eprint!("\r{text}{:pad$}", "");
-        }
+    /// Where the work is, of `total`.
+    pub(crate) fn set(&self, done: u64) {
+        self.bar.set_position(done);
+    }
+
+    /// One more of `total` done, and what is under way.
+    pub(crate) fn step(&self, now: &str) {
+        self.bar.inc(1);
+        self.bar.set_message(now.to_string());
+    }
+
+    /// What is under way.
+    pub(crate) fn message(&self, now: &str) {
+        self.bar.set_message(now.to_string());
     }
 
     /// Wipe the line, before results or other lines are written.
-    pub(crate) fn clear(&mut self) {
-        if self.on && self.width > 0 {
-            eprint!("\r{:w$}\r", "", w = self.width);
-            self.width = 0;
-        }
+    pub(crate) fn clear(&self) {
+        self.bar.finish_and_clear();
     }
 }
 

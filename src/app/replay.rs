@@ -77,7 +77,7 @@ fn replay(
     } else {
         None
     };
-    let mut progress = Progress::new(ui.is_none());
+    let progress = Progress::new(ui.is_none(), "replay", size);
     let started = std::time::Instant::now();
     // Pacing for --speed: a log timestamp and the moment it was replayed.
     let mut pace: Option<(u64, std::time::Instant)> = None;
@@ -122,15 +122,12 @@ fn replay(
         if let Some(ui) = ui.as_mut() {
             ui.history.live.sample(&monitor);
         }
-        if let Some(pct) = (reader.position() * 100).checked_div(size) {
-            let pct = pct as usize;
-            if pct != shown {
-                shown = pct;
-                progress.show(&format!(
-                    "replay: {pct:3}% [{:<40}]",
-                    "#".repeat(pct * 40 / 100)
-                ));
-            }
+        // Redrawn per thousandth of the log, not per record.
+        if let Some(permille) = (reader.position() * 1000).checked_div(size)
+            && permille != shown
+        {
+            shown = permille;
+            progress.set(reader.position());
         }
     }
     monitor.finish(&mut files);
@@ -227,7 +224,7 @@ fn replay_own_log(
         files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
     }
     tracing::info!("{}: {}", file.display(), format.name());
-    let mut progress = Progress::new(true);
+    let progress = Progress::new(true, "replay", size);
     let started = std::time::Instant::now();
     let mut shown = 0;
     let mut emit = |r: &ahcmon::telemetry::Record| monitor.on_record(1, r, &mut files);
@@ -238,14 +235,11 @@ fn replay_own_log(
                 source,
             })?;
             ahcmon::link::dataflash::read(std::io::BufReader::new(input), &mut emit, &mut |at| {
-                if let Some(pct) = (at * 100).checked_div(size)
-                    && pct as usize != shown
+                if let Some(permille) = (at * 1000).checked_div(size)
+                    && permille != shown
                 {
-                    shown = pct as usize;
-                    progress.show(&format!(
-                        "replay: {pct:3}% [{:<40}]",
-                        "#".repeat(shown * 40 / 100)
-                    ));
+                    shown = permille;
+                    progress.set(at);
                 }
             })
         }

@@ -27,10 +27,10 @@ fn thresholds(names: Vec<String>, seeds: u64, json: bool) -> anyhow::Result<()> 
             .collect::<Result<_, _>>()?
     };
     let seed_list: Vec<u64> = (0..seeds).map(|i| CALIBRATION_FIRST_SEED + i).collect();
-    let mut progress = super::Progress::new(true);
+    let progress = super::Progress::new(true, "thresholds", list.len() as u64);
     let mut out = vec![];
     for named in &list {
-        progress.show(&format!("thresholds: {} ({} flights)", named.name, seeds));
+        progress.step(&format!("{} ({} flights)", named.name, seeds));
         out.push(calibrate_threshold(named, &seed_list)?);
     }
     progress.clear();
