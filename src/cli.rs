@@ -403,6 +403,10 @@ pub struct OutputArgs {
     /// Write every k-th step's estimates.
     #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub decimate: u64,
+    /// Print each decision with its reasons on a second line (the rule's words and numbers;
+    /// the decisions JSON always carries them as `detail`).
+    #[arg(long)]
+    pub explain: bool,
 }
 
 /// `sim --autopilot`.

@@ -78,7 +78,7 @@ fn the_default_says_the_notes_and_q_only_the_results() {
             .collect()
     };
     assert_eq!(results(&quiet_out), results(&out));
-    assert!(quiet_out.contains("fault  motor1"), "{quiet_out}");
+    assert!(quiet_out.contains("motor1 ch1    fault "), "{quiet_out}");
     // -q and -v contradict each other.
     let (code, _, err) = replay(&["-q", "-v"], None);
     assert_eq!(code, 2, "{err}");

@@ -157,12 +157,14 @@ impl OutputArgs {
         let mut outputs = self.flags().to_vec();
         outputs.extend_from_slice(more);
         check_outputs(inputs, &outputs)?;
-        Outputs::new(
+        let mut outputs = Outputs::new(
             self.decisions.as_deref(),
             self.estimates.as_deref(),
             self.decimate,
         )
-        .context("cannot create output file")
+        .context("cannot create output file")?;
+        outputs.explain = self.explain;
+        Ok(outputs)
     }
 }
 

@@ -197,6 +197,8 @@ pub struct Outputs {
     steps: std::collections::BTreeMap<u8, u64>,
     /// Print decisions to stdout as they are made.
     pub echo: bool,
+    /// With each printed decision, its reasons (`--explain`).
+    pub explain: bool,
     pub error: Option<std::io::Error>,
     /// All decisions seen (for summaries and tests).
     pub seen: Vec<Decision>,
@@ -219,6 +221,7 @@ impl Outputs {
             decimate: decimate.max(1),
             steps: Default::default(),
             echo: true,
+            explain: false,
             error: None,
             seen: vec![],
             plot: None,
@@ -261,44 +264,68 @@ impl Outputs {
     }
 }
 
-/// One line for a person: `t=112.90 s sysid 1 fault motor1 (ch 1) loss_of_effectiveness ...`.
-pub fn describe(d: &Decision) -> String {
-    describe_with(d, true)
+/// One line for a person, in fixed columns: time, vehicle, actuator, event, class, the
+/// MIT-UKF's gamma and delta with bounds, the rule that decided, the filters that alarmed:
+/// `t=  113.66 s  sysid 1    motor1 ch1    fault            loss          gamma 0.74 [0.68, 0.79]  delta +0.034 [+0.016, +0.053]  K1  UKF+ESMF`.
+/// With `explain`, the decision's reasons (its rule's words and numbers) follow on a second
+/// line.
+pub fn describe(d: &Decision, explain: bool) -> String {
+    describe_with(d, true, explain)
 }
 
 /// `describe`, leaving out the system id where the reader knows the vehicle (a dashboard
 /// showing one).
-pub fn describe_with(d: &Decision, sysid: bool) -> String {
+pub fn describe_with(d: &Decision, sysid: bool, explain: bool) -> String {
     let mut s = format!("t={:8.2} s", d.t);
     if sysid {
-        s += &format!("  sysid {}", d.sysid);
+        s += &format!("  sysid {:<3}", d.sysid);
     }
-    s += &format!("  {}", d.event.as_str());
-    if let Some(a) = &d.actuator {
-        s += &format!("  {a}");
-        if let Some(c) = d.channel {
-            s += &format!(" (ch {c})");
-        }
-    }
-    if let Some(c) = d.class {
-        s += &format!("  {}", c.as_str());
-    }
+    let who = match (&d.actuator, d.channel) {
+        (Some(a), Some(c)) => format!("{a} ch{c}"),
+        (Some(a), None) => a.clone(),
+        (None, _) => String::new(),
+    };
+    s += &format!("  {who:<12}  {:<15}", d.event.as_str());
+    s += &format!("  {:<12}", d.class.map_or("", short_class));
     if let (Some(g), Some(b)) = (d.gamma, d.gamma_bounds) {
         s += &format!("  gamma {g:.2} [{:.2}, {:.2}]", b[0], b[1]);
     }
     if let (Some(g), Some(b)) = (d.delta, d.delta_bounds) {
         s += &format!("  delta {g:+.3} [{:+.3}, {:+.3}]", b[0], b[1]);
     }
+    if let Some(r) = d.rule {
+        s += &format!("  {r:?}");
+    }
     if !d.filters.is_empty() {
-        s += &format!("  by {}", d.filters.join("+"));
+        // As the planner's alerts name them.
+        let by: Vec<&str> = d
+            .filters
+            .iter()
+            .map(|f| match *f {
+                "mit-ukf" => "UKF",
+                "mit-esmf" => "ESMF",
+                other => other,
+            })
+            .collect();
+        s += &format!("  {}", by.join("+"));
     }
     if !d.also.is_empty() {
         s += &format!("  also {}", d.also.join(","));
     }
-    if let Some(x) = &d.detail {
-        s += &format!("  ({x})");
+    let mut s = s.trim_end().to_string();
+    if let Some(x) = d.detail.as_ref().filter(|_| explain) {
+        s += &format!("\n             {x}");
     }
     s
+}
+
+/// A class in one word, for a line (the JSON keeps the full name).
+fn short_class(c: crate::diagnose::vehicle::FaultClass) -> &'static str {
+    use crate::diagnose::vehicle::FaultClass;
+    match c {
+        FaultClass::LossOfEffectiveness => "loss",
+        other => other.as_str(),
+    }
 }
 
 impl Outputs {
@@ -307,7 +334,13 @@ impl Outputs {
             use std::io::Write as _;
             // The echo is a convenience copy (the decisions file keeps every record): if the
             // terminal or pipe is gone, stop echoing rather than fail.
-            if writeln!(crate::output::file::for_people(), "{}", describe(d)).is_err() {
+            if writeln!(
+                crate::output::file::for_people(),
+                "{}",
+                describe(d, self.explain)
+            )
+            .is_err()
+            {
                 self.echo = false;
             }
         }

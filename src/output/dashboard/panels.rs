@@ -346,7 +346,8 @@ pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], s
         .filter(|(k, d)| *k == 0 || !d.event.is_statement())
         .map(|(_, d)| d)
         .take(n)
-        .map(|d| {
+        .enumerate()
+        .map(|(k, d)| {
             let style = match d.event {
                 Event::Fault | Event::Changed => Style::default().fg(Color::Red),
                 Event::Cleared | Event::LinkRestored | Event::SuspectCleared => {
@@ -361,7 +362,9 @@ pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], s
                 Event::ExcitationLow => Style::default().fg(Color::DarkGray),
             };
             // The vehicle shown is the selected one: its id on every line only cuts the rest.
-            (style, wrap(&describe_with(d, sysid.is_none()), width))
+            // The newest decision with its reasons, which the operator reads now.
+            let text = describe_with(d, sysid.is_none(), k == 0).replace('\n', " ");
+            (style, wrap(&text, width))
         })
         .collect();
     let rows = decision_rows(&shown.iter().map(|(_, l)| l.len()).collect::<Vec<_>>(), n);
