@@ -312,7 +312,8 @@ fn older_decisions_are_one_line_each_and_the_newest_has_its_reasons() {
     let newest = shown[0].detail.as_deref().expect("the newest has a detail");
     assert!(squeeze(&panel.concat()).contains(&squeeze(newest)), "{s}");
     for older in &shown[1..] {
-        let line = ahcmon::output::jsonl::describe_with(older, false, false);
+        // (The panel is 98 columns inside: the narrow line.)
+        let line = ahcmon::output::jsonl::describe_narrow(older, false);
         assert!(!line.contains('\n'));
         // Its header at least (time, actuator, event, class, gamma): a line wider than the
         // panel is cut, and says so.
@@ -446,4 +447,83 @@ fn the_footer_shows_the_drops_there_are() {
         dropped.contains("resync 3 · unknown 1739") && !dropped.contains("bad crc"),
         "{dropped}"
     );
+}
+
+/// At 80x24 and 200x60: every heading of the actuator table whole, and on the chart of the
+/// faulty servo the healthy value as a line (a row of its colour across the chart) and the
+/// fault's decisions as vertical marks (a column of the fault colour over several rows).
+#[test]
+fn the_chart_marks_the_healthy_value_and_the_decisions_and_the_headings_fit() {
+    use ratatui::style::Color;
+    let (m, d, hist) = state_at(50.0);
+    for (w, h) in [(80u16, 24u16), (200, 60)] {
+        let ui = UiState {
+            actuator: 1,
+            ..UiState::default()
+        };
+        let link = LinkInfo {
+            name: "udpin:127.0.0.1:14550".into(),
+            rate_hz: 200.0,
+            data_age_s: Some(0.02),
+            ..Default::default()
+        };
+        let mut term = Terminal::new(TestBackend::new(w, h)).unwrap();
+        term.draw(|f| render(f, &m, &d, &hist, &ui, &link)).unwrap();
+        let buf = term.backend().buffer().clone();
+        let text: Vec<String> = (0..h)
+            .map(|y| (0..w).map(|x| buf[(x, y)].symbol()).collect())
+            .collect();
+        let screen = text.join("\n");
+        let heading = text
+            .iter()
+            .find(|l| l.contains("actuator") && l.contains("state"))
+            .unwrap_or_else(|| panic!("{w}x{h}: no table heading\n{screen}"));
+        for name in ["UKF gamma", "UKF delta", "set gamma", "set delta", "state"] {
+            assert!(heading.contains(name), "{w}x{h}: {name} cut in {heading}");
+        }
+        // The gamma chart: from its title's row to the row of its time axis.
+        let top = text
+            .iter()
+            .position(|l| l.contains(" swash2 gamma "))
+            .unwrap_or_else(|| panic!("{w}x{h}: no chart of swash2\n{screen}"));
+        let bottom = top + text[top..].iter().position(|l| l.contains(" s ")).unwrap();
+        let right = text[top]
+            .find(" swash2 delta ")
+            .map_or(w as usize, |_| w as usize / 2);
+        let colour_at = |x: usize, y: usize| buf[(x as u16, y as u16)].fg;
+        let healthy_run = (top + 1..bottom)
+            .map(|y| {
+                (0..right)
+                    .filter(|&x| colour_at(x, y) == ahcmon::output::dashboard::HEALTHY_COLOUR)
+                    .count()
+            })
+            .max()
+            .unwrap();
+        assert!(
+            healthy_run >= right / 3,
+            "{w}x{h}: healthy line {healthy_run} cells\n{screen}"
+        );
+        let fault = ahcmon::output::dashboard::mark_colour(ahcmon::diagnose::vehicle::Event::Fault);
+        assert_eq!(fault, Color::Red);
+        let marked = (0..right).any(|x| {
+            (top + 1..bottom)
+                .filter(|&y| colour_at(x, y) == fault)
+                .count()
+                >= 2
+        });
+        assert!(marked, "{w}x{h}: no decision mark\n{screen}");
+    }
+}
+
+/// Tab with one vehicle keeps the selected actuator; another vehicle starts at its first.
+#[test]
+fn tab_with_one_vehicle_keeps_the_selection() {
+    let mut ui = UiState {
+        actuator: 2,
+        ..UiState::default()
+    };
+    ui.select_vehicle(0);
+    assert_eq!((ui.vehicle, ui.actuator), (0, 2));
+    ui.select_vehicle(1);
+    assert_eq!((ui.vehicle, ui.actuator), (1, 0));
 }

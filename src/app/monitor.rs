@@ -60,9 +60,11 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         .into());
     }
     let speed = in_range("--speed", speed, SPEED_RANGE.0, SPEED_RANGE.1)?;
-    tracing::info!("demo: {}", named.scenario.description);
+    // One clock: the autopilot's, which the monitor shows (the scenario's description counts
+    // from the start of the flight).
     tracing::info!(
-        "demo: on the autopilot's clock, which the monitor shows: {}",
+        "demo: {}, on the autopilot's clock as the monitor shows it: {}",
+        named.name,
         ahcmon::scenario::script_on_vehicle_clock(&named.scenario)
     );
     warn_fault_in_calibration("demo", &named);

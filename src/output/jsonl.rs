@@ -319,6 +319,33 @@ pub fn describe_with(d: &Decision, sysid: bool, explain: bool) -> String {
     s
 }
 
+/// The same columns narrower, for an 80-column dashboard: no delta, no filters, the time bare
+/// (`  113.68  motor1 ch1    changed          loss          gamma 0.74 [0.68, 0.79]  K1`).
+pub fn describe_narrow(d: &Decision, explain: bool) -> String {
+    let who = match (&d.actuator, d.channel) {
+        (Some(a), Some(c)) => format!("{a} ch{c}"),
+        (Some(a), None) => a.clone(),
+        (None, _) => String::new(),
+    };
+    let mut s = format!(
+        "{:8.2}  {who:<12}  {:<15}  {:<12}",
+        d.t,
+        d.event.as_str(),
+        d.class.map_or("", short_class)
+    );
+    if let (Some(g), Some(b)) = (d.gamma, d.gamma_bounds) {
+        s += &format!("  gamma {g:.2} [{:.2}, {:.2}]", b[0], b[1]);
+    }
+    if let Some(r) = d.rule {
+        s += &format!("  {r:?}");
+    }
+    let mut s = s.trim_end().to_string();
+    if let Some(x) = d.detail.as_ref().filter(|_| explain) {
+        s += &format!("\n          {x}");
+    }
+    s
+}
+
 /// A class in one word, for a line (the JSON keeps the full name).
 fn short_class(c: crate::diagnose::vehicle::FaultClass) -> &'static str {
     use crate::diagnose::vehicle::FaultClass;

@@ -15,6 +15,7 @@ use ratatui::widgets::{Paragraph, Wrap};
 use std::collections::{BTreeMap, VecDeque};
 
 mod panels;
+pub use panels::{HEALTHY_COLOUR, mark_colour};
 use panels::{actuator_table, chart, decision_list, footer, header_spans, help, table_height};
 
 /// What the operator selected and toggled.
@@ -27,6 +28,16 @@ pub struct UiState {
     pub help: bool,
     /// A line of context after the vehicle (the demo's script, in the vehicle's clock).
     pub note: Option<String>,
+}
+
+impl UiState {
+    /// Another vehicle: its first actuator; the same one (the only one) keeps the actuator.
+    pub fn select_vehicle(&mut self, vehicle: usize) {
+        if vehicle != self.vehicle {
+            self.vehicle = vehicle;
+            self.actuator = 0;
+        }
+    }
 }
 
 /// The link as the footer shows it.
@@ -227,7 +238,7 @@ pub fn render(
         .split(area);
     f.render_widget(Paragraph::new(header).wrap(Wrap { trim: false }), rows[0]);
     actuator_table(f, rows[1], monitor, decisions, sysid, ui);
-    chart(f, rows[2], monitor, history, sysid, ui);
+    chart(f, rows[2], monitor, history, decisions, sysid, ui);
     decision_list(f, rows[3], decisions, sysid);
     let lost: u64 = monitor
         .assembler
@@ -359,13 +370,12 @@ impl TerminalUi {
                     self.ui.actuator = (self.ui.actuator + actuators.max(1) - 1) % actuators.max(1);
                 }
                 KeyCode::Tab | KeyCode::Right => {
-                    self.ui.vehicle = (self.ui.vehicle + 1) % monitor.pipelines.len().max(1);
-                    self.ui.actuator = 0;
+                    let n = monitor.pipelines.len().max(1);
+                    self.ui.select_vehicle((self.ui.vehicle + 1) % n);
                 }
                 KeyCode::BackTab | KeyCode::Left => {
                     let n = monitor.pipelines.len().max(1);
-                    self.ui.vehicle = (self.ui.vehicle + n - 1) % n;
-                    self.ui.actuator = 0;
+                    self.ui.select_vehicle((self.ui.vehicle + n - 1) % n);
                 }
                 _ => {}
             }

@@ -6,7 +6,7 @@ use crate::diagnose::vehicle::{Decision, Event, FaultClass, Health};
 use crate::estimate::vehicle::{AhcEstimate, FILTER_NAMES};
 use crate::model::MAX_ACTUATORS;
 use crate::monitor::Monitor;
-use crate::output::jsonl::describe_with;
+use crate::output::jsonl::{describe_narrow, describe_with};
 use ratatui::Frame;
 use ratatui::layout::{Constraint, Direction, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
@@ -149,15 +149,30 @@ pub(super) fn actuator_table(
         );
         return;
     };
-    // Bar width from the space left after the fixed columns.
-    let bar = ((area.width as usize).saturating_sub(10 + 4 + 2 * 7 + 12 + 8) / 4).clamp(4, 30);
+    // Bar width from the space left after the fixed columns (name 8, channel 3, two gamma
+    // values 6, the state 13, six gaps, the borders): at 80 columns 9, which holds every
+    // heading and "unexcited".
+    let bar = ((area.width as usize).saturating_sub(8 + 3 + 2 * 6 + 13 + 6 + 2) / 4).clamp(4, 30);
+    let unexcited = if bar >= 11 {
+        "not excited"
+    } else {
+        "unexcited"
+    };
     let header = Row::new(vec![
         "actuator".to_string(),
         "ch".into(),
         format!("{:<w$}", "UKF gamma", w = bar + 6),
-        format!("{:<w$}", "UKF delta", w = bar),
+        format!(
+            "{:<w$}",
+            if bar >= 9 { "UKF delta" } else { "UKF δ" },
+            w = bar
+        ),
         format!("{:<w$}", "set gamma", w = bar + 6),
-        format!("{:<w$}", "set delta", w = bar),
+        format!(
+            "{:<w$}",
+            if bar >= 9 { "set delta" } else { "set δ" },
+            w = bar
+        ),
         "state".into(),
     ])
     .style(Style::default().add_modifier(Modifier::BOLD));
@@ -177,19 +192,25 @@ pub(super) fn actuator_table(
             state = "cannot judge".into();
             style = Style::default().fg(Color::DarkGray);
         } else if p.active[j].is_none() && last.is_some_and(|d| d.event == Event::ExcitationLow) {
-            state = "excitation low".into();
+            // (Cut to fit 13 columns on a narrow terminal.)
+            state = if bar >= 11 {
+                "excitation low"
+            } else {
+                "excit. low"
+            }
+            .into();
             style = Style::default().fg(Color::Yellow);
         }
         // A set filter's bound that is still the a priori box says nothing: said instead of
         // drawn.
         let cells = |e: &AhcEstimate| {
             let gamma = if e.unexcited[0] {
-                format!("{:<bar$}", "not excited")
+                format!("{:<bar$}", unexcited)
             } else {
                 bound_bar(e.gamma, e.gamma_lo, e.gamma_hi, 1.0, (0.0, 2.0), bar)
             };
             let delta = if e.unexcited[1] {
-                format!("{:<bar$}", "not excited")
+                format!("{:<bar$}", unexcited)
             } else {
                 bound_bar(e.delta, e.delta_lo, e.delta_hi, 0.0, (-1.0, 1.0), bar)
             };
@@ -213,7 +234,7 @@ pub(super) fn actuator_table(
         rows.push(row);
     }
     let widths = [
-        Constraint::Length(9),
+        Constraint::Length(8),
         Constraint::Length(3),
         Constraint::Length(bar as u16 + 6),
         Constraint::Length(bar as u16),
@@ -224,11 +245,28 @@ pub(super) fn actuator_table(
     f.render_widget(Table::new(rows, widths).header(header).block(block), area);
 }
 
+/// The colour of a decision's mark on the chart: a fault's red, its end's green, a statement's
+/// yellow.
+pub fn mark_colour(e: Event) -> Color {
+    match e {
+        Event::Fault | Event::Changed => Color::Red,
+        Event::Cleared | Event::SuspectCleared => Color::Green,
+        _ => Color::Yellow,
+    }
+}
+
+/// The colour of the healthy value's line on the chart.
+pub const HEALTHY_COLOUR: Color = Color::Gray;
+
+/// The selected actuator's gamma and delta over the last 30 s: each drawn filter's estimate
+/// and bounds as lines, the healthy value as a line, and the decisions on the actuator as
+/// vertical marks.
 pub(super) fn chart(
     f: &mut Frame,
     area: Rect,
     monitor: &Monitor,
     history: &History,
+    decisions: &[Decision],
     sysid: Option<u8>,
     ui: &UiState,
 ) {
@@ -294,9 +332,27 @@ pub(super) fn chart(
                 p.1 = p.1.clamp(lo, hi);
             }
         }
+        let healthy_line = [(t0, healthy), (t1, healthy)];
+        // Each decision on this actuator in view, as a vertical mark.
+        let marks: Vec<([(f64, f64); 2], Color)> = decisions
+            .iter()
+            .filter(|d| d.sysid == s && d.actuator.as_deref() == Some(name.as_str()))
+            .filter(|d| (t0..=t1).contains(&d.t))
+            .map(|d| ([(d.t, lo), (d.t, hi)], mark_colour(d.event)))
+            .collect();
         let colours = [Color::Cyan, Color::Magenta];
         let mut sets = vec![];
         for fi in 0..2 {
+            // Bounds as thin lines in the filter's colour, dimmed.
+            for b in 1..3 {
+                sets.push(
+                    Dataset::default()
+                        .marker(Marker::Braille)
+                        .graph_type(GraphType::Line)
+                        .style(Style::default().fg(colours[fi]).add_modifier(Modifier::DIM))
+                        .data(&lines[3 * fi + b]),
+                );
+            }
             sets.push(
                 Dataset::default()
                     .name(FILTER_NAMES[DRAWN[fi]])
@@ -305,14 +361,25 @@ pub(super) fn chart(
                     .style(Style::default().fg(colours[fi]))
                     .data(&lines[3 * fi]),
             );
-            for b in 1..3 {
-                sets.push(
-                    Dataset::default()
-                        .marker(Marker::Dot)
-                        .style(Style::default().fg(colours[fi]).add_modifier(Modifier::DIM))
-                        .data(&lines[3 * fi + b]),
-                );
-            }
+        }
+        // The healthy value and the decisions over the estimates: a cell shows the last series
+        // drawn in it, and these are what the estimates are read against.
+        sets.push(
+            Dataset::default()
+                .name("healthy")
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::default().fg(HEALTHY_COLOUR))
+                .data(&healthy_line),
+        );
+        for (line, colour) in &marks {
+            sets.push(
+                Dataset::default()
+                    .marker(Marker::Braille)
+                    .graph_type(GraphType::Line)
+                    .style(Style::default().fg(*colour))
+                    .data(line),
+            );
         }
         let title = format!(
             " {name} {what}{} ",
@@ -363,7 +430,13 @@ pub(super) fn decision_list(f: &mut Frame, area: Rect, decisions: &[Decision], s
             };
             // The vehicle shown is the selected one: its id on every line only cuts the rest.
             // The newest decision with its reasons, which the operator reads now.
-            let text = describe_with(d, sysid.is_none(), k == 0).replace('\n', " ");
+            // Under the full line's width, the narrow one (no delta, no filters).
+            let text = if width >= 130 {
+                describe_with(d, sysid.is_none(), k == 0)
+            } else {
+                describe_narrow(d, k == 0)
+            };
+            let text = text.replace('\n', " ");
             (style, wrap(&text, width))
         })
         .collect();
