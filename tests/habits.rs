@@ -290,3 +290,43 @@ fn the_summary_as_json_agrees_with_the_decisions_and_the_text() {
             .starts_with("cleared at")
     );
 }
+
+/// A one-hour log's plot: small (an envelope per pixel column), time on the vehicle's clock
+/// as m:ss at round steps, the title within the canvas, valid XML.
+#[test]
+fn a_one_hour_plot_is_small_and_reads_as_a_clock() {
+    let dir = common::temp_dir("habits_plot_1h");
+    let (tlog, svg) = (dir.join("1h.tlog"), dir.join("1h.svg"));
+    let scenario =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("replay/scenarios/quad-x-1h.toml");
+    let (code, _, err) = ahcmon(&[
+        "sim",
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--tlog",
+        tlog.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = ahcmon(&[
+        "replay",
+        tlog.to_str().unwrap(),
+        "--plot",
+        svg.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.len() <= 300_000, "{} bytes", text.len());
+    for tick in [">10:00<", ">30:00<", ">50:00<"] {
+        assert!(text.contains(tick), "no tick {tick}");
+    }
+    assert!(!text.contains(">-0.0"), "a tick reads -0");
+    // Four motors, gamma and delta each.
+    assert_eq!(text.matches("<rect x=").count(), 8);
+    let checked = common::run_python(&[
+        "-c",
+        "import sys, xml.dom.minidom as m; m.parse(sys.argv[1]); print('ok')",
+        svg.to_str().unwrap(),
+    ]);
+    assert_eq!(checked.trim(), "ok");
+}

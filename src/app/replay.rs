@@ -55,7 +55,7 @@ fn replay(
         // Fail now rather than after a long replay.
         ahcmon::output::jsonl::OutputFile::open(p)
             .with_context(|| format!("cannot write {}", p.display()))?;
-        files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
+        files.plot = Some(ahcmon::output::plot::PlotRecorder::default());
     }
     // The dashboard at a replay speed a person can follow; --fast (the default) is headless.
     let dashboard =
@@ -221,7 +221,7 @@ fn replay_own_log(
     if let Some(p) = plot {
         ahcmon::output::jsonl::OutputFile::open(p)
             .with_context(|| format!("cannot write {}", p.display()))?;
-        files.plot = Some(ahcmon::output::svg::PlotRecorder::default());
+        files.plot = Some(ahcmon::output::plot::PlotRecorder::default());
     }
     tracing::info!("{}: {}", file.display(), format.name());
     let progress = Progress::new(true, "replay", size);

@@ -203,7 +203,7 @@ pub struct Outputs {
     /// All decisions seen (for summaries and tests).
     pub seen: Vec<Decision>,
     /// Traces for `--plot`.
-    pub plot: Option<crate::output::svg::PlotRecorder>,
+    pub plot: Option<crate::output::plot::PlotRecorder>,
     /// Planner alerts (`--alerts`): frames are queued here for the live loop to send.
     pub alerts: Option<crate::output::alerts::Alerts>,
 }

@@ -6,6 +6,7 @@ pub mod dashboard;
 pub mod file;
 pub mod jsonl;
 pub mod matrix;
+pub mod plot;
 pub mod summary;
 pub mod summary_json;
 pub mod svg;
