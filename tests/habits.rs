@@ -330,3 +330,42 @@ fn a_one_hour_plot_is_small_and_reads_as_a_clock() {
     ]);
     assert_eq!(checked.trim(), "ok");
 }
+
+/// A decision on a filter alarm carries the numbers behind it (the alarming filter's
+/// statistic and threshold), and its line shows them: the SITL quad's first fault line read
+/// healthy-looking MIT-UKF numbers while the MIT-ESMF alone alarmed.
+#[test]
+fn a_filter_alarm_s_decision_shows_the_numbers_behind_it() {
+    let dir = common::temp_dir("habits_evidence");
+    let file = dir.join("d.jsonl");
+    let (code, out, err) = ahcmon(&["replay", &sitl_log(), "--decisions", file.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let ds: Vec<Value> = std::fs::read_to_string(&file)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    for d in &ds {
+        let filters = d["filters"].as_array().unwrap();
+        let e = &d["evidence"];
+        assert_eq!(filters.is_empty(), e.is_null(), "{d}");
+        if !e.is_null() {
+            assert!(filters.contains(&e["filter"]), "{d}");
+        }
+    }
+    let first = ds.iter().find(|d| d["event"] == "fault").expect("a fault");
+    let e = &first["evidence"];
+    let (value, threshold) = (
+        e["value"].as_f64().unwrap(),
+        e["threshold"].as_f64().unwrap(),
+    );
+    assert!(value > threshold, "{first}");
+    let line = out
+        .lines()
+        .find(|l| l.contains(" fault "))
+        .expect("a fault line");
+    assert!(
+        line.contains(&format!("dev {value:.3}/{threshold:.3}")),
+        "{line}"
+    );
+}

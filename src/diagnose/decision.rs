@@ -217,6 +217,16 @@ impl Event {
     }
 }
 
+/// A filter's D1 statistic against its threshold: `deviation` (the attributed deviation and
+/// excursion, `hypot`) or `gain_gap` (an angle output's gain statistic).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Evidence {
+    pub filter: &'static str,
+    pub statistic: &'static str,
+    pub value: f64,
+    pub threshold: f64,
+}
+
 /// One decision, as written to the decisions JSONL (`replay/schemas/decisions.schema.json`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Decision {
@@ -245,6 +255,10 @@ pub struct Decision {
     pub deviation: Option<f64>,
     /// Which filters agree.
     pub filters: Vec<&'static str>,
+    /// The numbers behind the filters' alarm: the alarming filter's statistic that stands
+    /// highest against its threshold (D1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evidence: Option<Evidence>,
     pub confidence: f64,
     /// Other actuators that also alarmed (a `multiple` isolation), by name.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -280,6 +294,7 @@ impl Decision {
             also: vec![],
             rule: None,
             in_crash: false,
+            evidence: None,
             detail: Some(detail.into()),
         }
     }

@@ -338,6 +338,7 @@ impl Diagnoser {
         let together = st.channels.iter().all(|c| c.alarm)
             && (st.channels[0].alarm_since - st.channels[1].alarm_since).abs()
                 <= self.params.agree_s;
+        let filter_bits = filters;
         let filters: Vec<&'static str> = (0..2)
             .filter(|f| filters & (1 << f) != 0)
             .map(|f| FILTER_NAMES[f])
@@ -349,6 +350,28 @@ impl Diagnoser {
             _ if together => 0.9,
             _ => 0.75,
         };
+        // The numbers behind the filters' alarm: the statistic standing highest against its
+        // threshold among the alarming filters.
+        let p = &self.params;
+        let evidence = (0..2)
+            .filter(|f| filter_bits & (1 << f) != 0)
+            .map(|f| {
+                let ch = &st.channels[f];
+                let deviation = ch.e.hypot(ch.excursion);
+                let (statistic, value, threshold) =
+                    if deviation / p.threshold >= ch.gain_gap.abs() / p.gain_threshold {
+                        ("deviation", deviation, p.threshold)
+                    } else {
+                        ("gain_gap", ch.gain_gap.abs(), p.gain_threshold)
+                    };
+                Evidence {
+                    filter: FILTER_NAMES[f],
+                    statistic,
+                    value,
+                    threshold,
+                }
+            })
+            .max_by(|a, b| (a.value / a.threshold).total_cmp(&(b.value / b.threshold)));
         Decision {
             t,
             sysid: self.sysid,
@@ -366,6 +389,7 @@ impl Diagnoser {
             also: vec![],
             rule: Some(rule),
             in_crash: false,
+            evidence,
             detail: None,
         }
     }

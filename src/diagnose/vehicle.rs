@@ -32,7 +32,7 @@
 //! the command separates them, else none with the reason; the data's class outranks the
 //! filters'. A fault clears (R1) when no filter alarms on it and the data do not name it.
 
-pub use super::decision::{Decision, DiagnosisParams, Event, FaultClass, Health, Rule};
+pub use super::decision::{Decision, DiagnosisParams, Event, Evidence, FaultClass, Health, Rule};
 
 use super::change::{ChangeKind, ChangeTest, KindFit, Reading};
 use super::isolate::Isolation;

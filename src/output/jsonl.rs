@@ -293,6 +293,7 @@ pub fn describe_with(d: &Decision, sysid: bool, explain: bool) -> String {
     if let (Some(g), Some(b)) = (d.delta, d.delta_bounds) {
         s += &format!("  delta {g:+.3} [{:+.3}, {:+.3}]", b[0], b[1]);
     }
+    s += &evidence(d);
     if let Some(r) = d.rule {
         s += &format!("  {r:?}");
     }
@@ -336,6 +337,7 @@ pub fn describe_narrow(d: &Decision, explain: bool) -> String {
     if let (Some(g), Some(b)) = (d.gamma, d.gamma_bounds) {
         s += &format!("  gamma {g:.2} [{:.2}, {:.2}]", b[0], b[1]);
     }
+    s += &evidence(d);
     if let Some(r) = d.rule {
         s += &format!("  {r:?}");
     }
@@ -344,6 +346,19 @@ pub fn describe_narrow(d: &Decision, explain: bool) -> String {
         s += &format!("\n          {x}");
     }
     s
+}
+
+/// The numbers behind a filter alarm, `dev 0.081/0.050` (the statistic over its threshold):
+/// a first decision's gamma and delta may still look healthy while the alarm stands.
+fn evidence(d: &Decision) -> String {
+    d.evidence.map_or(String::new(), |e| {
+        let what = if e.statistic == "deviation" {
+            "dev"
+        } else {
+            "gain"
+        };
+        format!("  {what} {:.3}/{:.3}", e.value, e.threshold)
+    })
 }
 
 /// A class in one word, for a line (the JSON keeps the full name).
