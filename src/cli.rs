@@ -95,14 +95,24 @@ pub struct ManArgs {
     pub dir: Option<PathBuf>,
 }
 
+/// `eval --json`, whose report is printed on standard output, among [`Command::stdout_flags`].
+pub const PRINTED_JSON: &str = "--json (the report)";
+
 impl Command {
-    /// The output flags given as `-` (standard output).
+    /// The output flags given as `-` (standard output), and `eval --json`'s report.
     pub fn stdout_flags(&self) -> Vec<&'static str> {
         fn common(o: &OutputArgs) -> Vec<(&'static str, Option<&std::path::Path>)> {
             o.flags().to_vec()
         }
         let flags: Vec<(&'static str, Option<&std::path::Path>)> = match self {
-            Command::Eval(a) => common(&a.output),
+            Command::Eval(a) => {
+                let mut f = common(&a.output);
+                // The report printed as JSON is standard output's: no output file goes there too.
+                if a.json {
+                    f.push((PRINTED_JSON, Some(std::path::Path::new("-"))));
+                }
+                f
+            }
             Command::Sim(a) => {
                 let mut f = common(&a.output);
                 f.extend([
@@ -253,7 +263,7 @@ pub struct MonitorArgs {
     #[command(flatten)]
     pub run: RunArgs,
     /// No dashboard: decisions are printed as they happen (automatic when stdout is not a
-    /// terminal).
+    /// terminal or an output flag is `-`).
     #[arg(long)]
     pub headless: bool,
     /// A vehicle silent this long (s) gets a link_lost decision.
@@ -283,7 +293,7 @@ pub struct MonitorArgs {
 #[derive(clap::Args)]
 pub struct DemoArgs {
     /// Print the decisions instead of showing the dashboard (automatic when stdout is not a
-    /// terminal).
+    /// terminal or an output flag is `-`).
     #[arg(long)]
     pub headless: bool,
     /// Another vehicle scenario instead of the built-in one (heli-demo).
@@ -342,7 +352,7 @@ pub struct ReplayArgs {
     /// As fast as the CPU goes (the default).
     #[arg(long)]
     pub fast: bool,
-    /// No dashboard (automatic when stdout is not a terminal).
+    /// No dashboard (automatic when stdout is not a terminal or an output flag is `-`).
     #[arg(long)]
     pub headless: bool,
     /// Draw every actuator's gamma and delta with both filters' bounds and the decisions

@@ -11,6 +11,12 @@ use anyhow::Context;
 use std::path::PathBuf;
 
 pub fn run(a: EvalArgs) -> anyhow::Result<()> {
+    if a.output.explain {
+        return Err(UsageError(
+            "--explain: eval prints no decision lines (its decisions file carries each one's `detail`)".into(),
+        )
+        .into());
+    }
     let EvalArgs {
         scenarios,
         json,

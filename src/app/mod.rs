@@ -206,9 +206,11 @@ pub(crate) fn check_outputs(
     inputs: &[&Path],
     outputs: &[(&str, Option<&Path>)],
 ) -> Result<(), UsageError> {
+    // `-` is standard output, no file (`claim_stdout` allows one).
     let outputs: Vec<(&str, &Path)> = outputs
         .iter()
         .filter_map(|(flag, p)| p.map(|p| (*flag, p)))
+        .filter(|(_, p)| !ahcmon::output::file::is_stdout(p))
         .collect();
     for (k, (flag, out)) in outputs.iter().enumerate() {
         // Only an existing input can be overwritten (a built-in scenario name is no file).
@@ -234,6 +236,8 @@ pub(crate) fn check_outputs(
 pub(crate) fn claim_stdout(flags: &[&str]) -> Result<(), UsageError> {
     match flags {
         [] => Ok(()),
+        // The report itself is what standard output carries.
+        [only] if *only == crate::cli::PRINTED_JSON => Ok(()),
         [_] => {
             ahcmon::output::file::take_stdout();
             Ok(())
@@ -339,7 +343,11 @@ impl Progress {
     /// `wanted`: the caller shows no other progress (a dashboard).
     pub(crate) fn new(wanted: bool, what: &str, total: u64) -> Self {
         use std::io::IsTerminal;
-        let on = wanted && std::io::stderr().is_terminal() && log::progress_enabled();
+        // (Not when an output took stdout: the lines for a person are on stderr then.)
+        let on = wanted
+            && std::io::stderr().is_terminal()
+            && log::progress_enabled()
+            && !ahcmon::output::file::stdout_taken();
         let bar = if on {
             indicatif::ProgressBar::new(total)
         } else {

@@ -284,7 +284,7 @@ fn monitor(
         }
     };
     out!("{}", summary::render(&monitor, &counters.link, &files.seen));
-    args.write_summary(&monitor, &counters.link, &files.seen)?;
+    let summary_written = args.write_summary(&monitor, &counters.link, &files.seen);
     if counters.backpressure_drops > 0 {
         outln!(
             "{} frames dropped: the estimators fell behind",
@@ -320,5 +320,6 @@ fn monitor(
             a.frames_unsent
         );
     }
-    write_error.map_or(Ok(()), Err)
+    write_error.map_or(Ok(()), Err)?;
+    summary_written
 }

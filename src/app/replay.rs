@@ -174,13 +174,19 @@ fn replay(
         "{}",
         summary::render(&monitor, &reader.counters, &files.seen)
     );
-    args.write_summary(&monitor, &reader.counters, &files.seen)?;
+    // Not for an input that is not a log: its outputs stay as they were.
+    let summary_written = if not_a_log {
+        Ok(())
+    } else {
+        args.write_summary(&monitor, &reader.counters, &files.seen)
+    };
     outln!(
         "replayed {} in {:.2} s",
         file.display(),
         replay_time.as_secs_f64()
     );
     write_error.map_or(Ok(()), Err)?;
+    summary_written?;
     // An input error, so a script can tell.
     if not_a_log && refused > 0 {
         return Err(UsageError(format!(
@@ -271,7 +277,7 @@ fn replay_own_log(
         "{}",
         summary::render(&monitor, &report.counters, &files.seen)
     );
-    args.write_summary(&monitor, &report.counters, &files.seen)?;
+    let summary_written = args.write_summary(&monitor, &report.counters, &files.seen);
     for note in &report.notes {
         outln!("log: {note}");
     }
@@ -290,6 +296,7 @@ fn replay_own_log(
         replay_time.as_secs_f64()
     );
     write_error.map_or(Ok(()), Err)?;
+    summary_written?;
     estimation_failed(&monitor)
 }
 

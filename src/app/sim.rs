@@ -65,6 +65,7 @@ pub fn run(a: SimArgs) -> anyhow::Result<()> {
         output.decimate,
     )
     .context("cannot create output file")?;
+    files.explain = output.explain;
     if let Some(path) = &truth {
         files = files
             .with_truth(path, cfg.gyro_noise, cfg.az_noise)

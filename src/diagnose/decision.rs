@@ -255,8 +255,9 @@ pub struct Decision {
     pub deviation: Option<f64>,
     /// Which filters agree.
     pub filters: Vec<&'static str>,
-    /// The numbers behind the filters' alarm: the alarming filter's statistic that stands
-    /// highest against its threshold (D1).
+    /// The numbers behind the filters' alarm: of the filters alarming at this step, the D1
+    /// statistic standing highest against its threshold (this step's value: the alarm is a
+    /// CUSUM, so it may stand under the threshold).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub evidence: Option<Evidence>,
     pub confidence: f64,

@@ -351,10 +351,11 @@ impl Diagnoser {
             _ => 0.75,
         };
         // The numbers behind the filters' alarm: the statistic standing highest against its
-        // threshold among the alarming filters.
+        // threshold among the filters alarming now (the alarm is a CUSUM: the value, of this
+        // step, may stand under its threshold while the alarm holds).
         let p = &self.params;
         let evidence = (0..2)
-            .filter(|f| filter_bits & (1 << f) != 0)
+            .filter(|&f| filter_bits & (1 << f) != 0 && st.channels[f].alarm)
             .map(|f| {
                 let ch = &st.channels[f];
                 let deviation = ch.e.hypot(ch.excursion);
@@ -371,6 +372,7 @@ impl Diagnoser {
                     threshold,
                 }
             })
+            .filter(|e| e.value.is_finite() && e.threshold.is_finite())
             .max_by(|a, b| (a.value / a.threshold).total_cmp(&(b.value / b.threshold)));
         Decision {
             t,

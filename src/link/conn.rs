@@ -300,6 +300,13 @@ mod tests {
             ("/dev/ttyACM0,115200", serial("/dev/ttyACM0", 115200)),
             ("/dev/ttyUSB0", serial("/dev/ttyUSB0", DEFAULT_BAUD)),
             ("serial:/dev/ttyUSB0", serial("/dev/ttyUSB0", DEFAULT_BAUD)),
+            (
+                "serial:/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0",
+                serial(
+                    "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0",
+                    DEFAULT_BAUD,
+                ),
+            ),
             ("COM3,921600", serial("COM3", 921600)),
             ("com4", serial("com4", DEFAULT_BAUD)),
             // A by-path name holds colons; the whole of it is the device.

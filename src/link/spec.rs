@@ -102,9 +102,13 @@ impl FromStr for ConnSpec {
             }
         })?;
         if kind == "serial" {
+            // The last `:` part is a baud rate when it is one word (`57600`, or a mistake such
+            // as `fast`); a device's name may hold colons (`pci-0000:00:14.0-usb-0:1:1.0`).
             let (dev, baud) = match rest.rsplit_once(':') {
-                Some((dev, baud)) => (dev, baud_rate(baud).map_err(bad)?),
-                None => (rest, DEFAULT_BAUD),
+                Some((dev, baud)) if baud.chars().all(|c| c.is_ascii_alphanumeric()) => {
+                    (dev, baud_rate(baud).map_err(bad)?)
+                }
+                _ => (rest, DEFAULT_BAUD),
             };
             if dev.is_empty() {
                 return Err(bad("no device".into()));

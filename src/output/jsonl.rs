@@ -265,8 +265,9 @@ impl Outputs {
 }
 
 /// One line for a person, in fixed columns: time, vehicle, actuator, event, class, the
-/// MIT-UKF's gamma and delta with bounds, the rule that decided, the filters that alarmed:
-/// `t=  113.66 s  sysid 1    motor1 ch1    fault            loss          gamma 0.74 [0.68, 0.79]  delta +0.034 [+0.016, +0.053]  K1  UKF+ESMF`.
+/// MIT-UKF's gamma and delta with bounds, the alarming filter's statistic over its threshold,
+/// the rule that decided, the filters that alarmed:
+/// `t=  113.66 s  sysid 1    motor1 ch1    fault            unclassified  gamma 0.95 [0.93, 0.97]  delta +0.035 [+0.024, +0.045]  dev 0.123/0.070  F1  ESMF`.
 /// With `explain`, the decision's reasons (its rule's words and numbers) follow on a second
 /// line.
 pub fn describe(d: &Decision, explain: bool) -> String {

@@ -14,9 +14,11 @@ use ratatui::text::Line;
 use ratatui::widgets::{Paragraph, Wrap};
 use std::collections::{BTreeMap, VecDeque};
 
+mod chart;
 mod panels;
-pub use panels::{HEALTHY_COLOUR, mark_colour};
-use panels::{actuator_table, chart, decision_list, footer, header_spans, help, table_height};
+use chart::chart;
+pub use chart::{HEALTHY_COLOUR, mark_colour};
+use panels::{actuator_table, decision_list, footer, header_spans, help, table_height};
 
 /// What the operator selected and toggled.
 #[derive(Debug, Clone, Default)]
