@@ -299,17 +299,7 @@ pub fn describe_with(d: &Decision, sysid: bool, explain: bool) -> String {
         s += &format!("  {r:?}");
     }
     if !d.filters.is_empty() {
-        // As the planner's alerts name them.
-        let by: Vec<&str> = d
-            .filters
-            .iter()
-            .map(|f| match *f {
-                "mit-ukf" => "UKF",
-                "mit-esmf" => "ESMF",
-                other => other,
-            })
-            .collect();
-        s += &format!("  {}", by.join("+"));
+        s += &format!("  {}", crate::output::filters_short(d));
     }
     if !d.also.is_empty() {
         s += &format!("  also {}", d.also.join(","));

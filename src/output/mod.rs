@@ -29,6 +29,20 @@ pub fn printable(s: &str) -> std::borrow::Cow<'_, str> {
     std::borrow::Cow::Owned(out)
 }
 
+/// A decision's filters as the planner's alerts and the decision lines name them: `UKF+ESMF`.
+pub fn filters_short(d: &crate::diagnose::vehicle::Decision) -> String {
+    let by: Vec<&str> = d
+        .filters
+        .iter()
+        .map(|f| match *f {
+            "mit-ukf" => "UKF",
+            "mit-esmf" => "ESMF",
+            other => other,
+        })
+        .collect();
+    by.join("+")
+}
+
 use crate::diagnose::vehicle::Decision;
 use crate::estimate::vehicle::AhcEstimate;
 use crate::sim::vehicle::VehicleSample;

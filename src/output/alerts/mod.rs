@@ -101,16 +101,7 @@ pub const TEXT_PREFIX: &str = "ahcmon: ";
 /// `ahcmon: swash2 LOE 41% UKF+ESMF`: what the planner shows (≤ 50 characters).
 pub fn statustext(d: &Decision) -> Option<(MavSeverity, String)> {
     let who = d.actuator.as_deref().unwrap_or("");
-    let by: Vec<&str> = d
-        .filters
-        .iter()
-        .map(|f| match *f {
-            "mit-ukf" => "UKF",
-            "mit-esmf" => "ESMF",
-            other => other,
-        })
-        .collect();
-    let by = by.join("+");
+    let by = crate::output::filters_short(d);
     // The actuator's name is what gives way when the text is too long, not the class.
     let fit = |what: &str, by: &str| {
         let tail = format!(" {what} {by}");
