@@ -461,6 +461,15 @@ fn mavproxy_with(
     proxy
 }
 
+/// The demo at 4 times real time, its alerts sent to `port` on 127.0.0.1.
+fn demo_alerting_to(port: u16) -> std::process::Output {
+    Command::new(bin())
+        .args(["demo", "--headless", "--speed", "4", "--alerts"])
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn mavproxy_forwards_our_statustext_to_its_outputs() {
     let (master, out_port) = (free_udp_port(), free_udp_port());
@@ -468,11 +477,7 @@ fn mavproxy_forwards_our_statustext_to_its_outputs() {
     // The planner side: a pymavlink listener on MAVProxy's --out.
     let listener = Listener::start(out_port, 60);
     let mut proxy = mavproxy(&[master], out_port, &state);
-    let demo = Command::new(bin())
-        .args(["demo", "--headless", "--speed", "4", "--alerts"])
-        .arg(format!("udpout:127.0.0.1:{master}"))
-        .output()
-        .unwrap();
+    let demo = demo_alerting_to(master);
     let seen = listener.finish();
     let _ = proxy.kill();
     let _ = proxy.wait();
@@ -509,11 +514,7 @@ fn mavproxy_s_console_shows_our_alerts_as_ours() {
         &["--target-system=1", "--target-component=0"],
         std::fs::File::create(&console).unwrap().into(),
     );
-    let demo = Command::new(bin())
-        .args(["demo", "--headless", "--speed", "4", "--alerts"])
-        .arg(format!("udpout:127.0.0.1:{master}"))
-        .output()
-        .unwrap();
+    let demo = demo_alerting_to(master);
     std::thread::sleep(std::time::Duration::from_secs(1));
     let _ = proxy.kill();
     let _ = proxy.wait();

@@ -353,7 +353,7 @@ fn evidence(d: &Decision) -> String {
 }
 
 /// A class in one word, for a line (the JSON keeps the full name).
-fn short_class(c: crate::diagnose::vehicle::FaultClass) -> &'static str {
+pub(crate) fn short_class(c: crate::diagnose::vehicle::FaultClass) -> &'static str {
     use crate::diagnose::vehicle::FaultClass;
     match c {
         FaultClass::LossOfEffectiveness => "loss",

@@ -150,7 +150,7 @@ impl PlotRecorder {
             return;
         }
         let label = match d.class {
-            Some(c) => format!("{} {}", d.event.as_str(), short(c)),
+            Some(c) => format!("{} {}", d.event.as_str(), super::jsonl::short_class(c)),
             None => d.event.as_str().to_string(),
         };
         self.marks.push((d.sysid, d.t, d.actuator.clone(), label));
@@ -235,13 +235,6 @@ fn merge_pairs(buckets: &mut Vec<Bucket>) {
         })
         .collect();
     *buckets = merged;
-}
-
-fn short(c: crate::diagnose::vehicle::FaultClass) -> &'static str {
-    match c {
-        crate::diagnose::vehicle::FaultClass::LossOfEffectiveness => "loss",
-        other => other.as_str(),
-    }
 }
 
 /// A tick step of 1, 2 or 5 times a power of ten giving at most `max` intervals over `span`.

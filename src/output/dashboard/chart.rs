@@ -67,7 +67,8 @@ pub(super) fn chart(
                 (e.delta, e.delta_lo, e.delta_hi)
             }
         };
-        let mut lines: Vec<Vec<(f64, f64)>> = vec![vec![]; 6];
+        // Each drawn filter's estimate.
+        let mut lines: [Vec<(f64, f64)>; 2] = Default::default();
         // Each drawn filter's bounds as runs of excited samples (a line must not join them
         // across a stretch where the bound is still the a priori box): [filter][lo, hi][run].
         let mut runs: [[Runs; 2]; 2] = Default::default();
@@ -80,7 +81,7 @@ pub(super) fn chart(
             for (t, est) in series {
                 for fi in 0..2 {
                     let (v, lo, hi) = pick(&est[fi]);
-                    lines[3 * fi].push((*t, v));
+                    lines[fi].push((*t, v));
                     // A set filter's bound still at the a priori box is not drawn.
                     for (b, v) in [lo, hi].into_iter().enumerate() {
                         let r = &mut runs[fi][b];
@@ -100,7 +101,7 @@ pub(super) fn chart(
         }
         // Scale on the estimates and the healthy value; bounds are clipped.
         let (mut lo, mut hi): (f64, f64) = (healthy - 0.2, healthy + 0.2);
-        for l in [&lines[0], &lines[3]] {
+        for l in &lines {
             for (_, v) in l.iter() {
                 if v.is_finite() {
                     lo = lo.min(*v);
@@ -142,7 +143,7 @@ pub(super) fn chart(
                     .marker(Marker::Braille)
                     .graph_type(GraphType::Line)
                     .style(Style::default().fg(colours[fi]))
-                    .data(&lines[3 * fi]),
+                    .data(&lines[fi]),
             );
         }
         // The healthy value and the decisions over the estimates: a cell shows the last series
