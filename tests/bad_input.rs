@@ -208,6 +208,12 @@ fn every_bad_input_has_its_stated_outcome() {
             says: "no MAVLink frame of a known message".into(),
         },
         Row {
+            what: "a device that never ends as the log",
+            input: Input::Path(PathBuf::from("/dev/zero")),
+            code: 2,
+            says: "no MAVLink frame of a known message in its first 1 MiB".into(),
+        },
+        Row {
             what: "an empty file",
             input: Input::Tlog(Vec::new()),
             code: 2,

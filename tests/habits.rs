@@ -341,6 +341,52 @@ fn a_one_hour_plot_is_small_and_reads_as_a_clock() {
     assert_eq!(checked.trim(), "ok");
 }
 
+/// `--plot FILE.png` draws the same picture as the SVG, rasterised at twice its size: a PNG
+/// whose every chunk's CRC holds (checked by Python's zlib, not by the encoder's crate) and
+/// whose pixels inflate to exactly its stated size.
+#[test]
+fn a_plot_named_png_is_a_png_of_the_svg() {
+    let dir = common::temp_dir("habits_plot_png");
+    let (svg, png) = (dir.join("p.svg"), dir.join("p.PNG"));
+    for out in [&svg, &png] {
+        let (code, _, err) =
+            ahcmon(&["replay", &sitl_log(), "--plot", out.to_str().unwrap(), "-q"]);
+        assert_eq!(code, 0, "{err}");
+    }
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let attr = |name: &str| -> u32 {
+        let at = text.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+        text[at..at + text[at..].find('"').unwrap()]
+            .parse()
+            .unwrap()
+    };
+    let checked = common::run_python(&[
+        "-c",
+        r#"
+import struct, sys, zlib
+d = open(sys.argv[1], 'rb').read()
+assert d[:8] == b'\x89PNG\r\n\x1a\n', 'no PNG signature'
+at, idat, ihdr = 8, b'', None
+while at < len(d):
+    n, kind = struct.unpack('>I4s', d[at:at + 8])
+    body = d[at + 8:at + 8 + n]
+    assert struct.unpack('>I', d[at + 8 + n:at + 12 + n])[0] == zlib.crc32(kind + body), kind
+    if kind == b'IHDR': ihdr = struct.unpack('>IIBB', body[:10])
+    if kind == b'IDAT': idat += body
+    at += 12 + n
+w, h, depth, colour = ihdr
+per_pixel = {6: 4, 2: 3}[colour] * depth // 8
+assert len(zlib.decompress(idat)) == h * (1 + w * per_pixel), 'pixel data'
+print(w, h)
+"#,
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        checked.trim(),
+        format!("{} {}", 2 * attr("width"), 2 * attr("height"))
+    );
+}
+
 /// A decision on a filter alarm carries the numbers behind it (the alarming filter's
 /// statistic and threshold), and its line shows them: the SITL quad's first fault line read
 /// healthy-looking MIT-UKF numbers while the MIT-ESMF alone alarmed.

@@ -196,8 +196,16 @@ fn replay(
         .into());
     }
     if not_a_log {
+        let read = if reader.gave_up {
+            format!(
+                "first {} MiB",
+                ahcmon::link::tlog::MAX_BYTES_BEFORE_FIRST_FRAME >> 20
+            )
+        } else {
+            format!("{size} bytes")
+        };
         return Err(UsageError(format!(
-            "{}: no MAVLink frame of a known message in its {size} bytes; is it a telemetry log (.tlog)? (the output files are left as they were)",
+            "{}: no MAVLink frame of a known message in its {read}; is it a telemetry log (.tlog)? (the output files are left as they were)",
             file.display()
         ))
         .into());
@@ -308,7 +316,14 @@ fn write_plot(
 ) -> anyhow::Result<()> {
     if let (Some(p), Some(rec)) = (plot, files.plot.as_ref()) {
         let title = format!("ahcmon replay {}", file.display());
-        ahcmon::output::file::write_whole(p, rec.render(&title).as_bytes())
+        let svg = rec.render(&title);
+        let bytes = if ahcmon::output::png::is_png(p) {
+            ahcmon::output::png::from_svg(&svg)
+                .with_context(|| format!("cannot draw {}", p.display()))?
+        } else {
+            svg.into_bytes()
+        };
+        ahcmon::output::file::write_whole(p, &bytes)
             .with_context(|| format!("cannot write {}", p.display()))?;
         tracing::info!("plot written to {}", p.display());
     }

@@ -22,6 +22,10 @@ const CHUNK: usize = 64 * 1024;
 const MAX_TS_JUMP_US: u64 = 86_400_000_000;
 /// Good frames in a row that move the reader's clock to theirs.
 const REANCHOR_FRAMES: u32 = 3;
+/// A telemetry log's first frame is in its first few hundred bytes; an input with no good
+/// frame in this many is no telemetry log (and an endless one, `/dev/zero`, would be read
+/// until stopped).
+pub const MAX_BYTES_BEFORE_FIRST_FRAME: u64 = 1 << 20;
 
 pub struct TlogReader<R: Read> {
     src: R,
@@ -39,6 +43,8 @@ pub struct TlogReader<R: Read> {
     pub counters: FrameCounters,
     /// With a key, only frames signed with it pass (`protocol::signing`).
     pub signing: Option<crate::protocol::signing::Signing>,
+    /// The reader stopped: `MAX_BYTES_BEFORE_FIRST_FRAME` read and no good frame in them.
+    pub gave_up: bool,
 }
 
 impl TlogReader<File> {
@@ -61,6 +67,7 @@ impl<R: Read> TlogReader<R> {
             base: 0,
             counters: FrameCounters::default(),
             signing: None,
+            gave_up: false,
         }
     }
 
@@ -148,6 +155,12 @@ impl<R: Read> TlogReader<R> {
     /// The next record: (timestamp µs, frame). `Ok(None)` at the end of the input.
     pub fn next_frame(&mut self) -> io::Result<Option<(u64, Frame)>> {
         loop {
+            let refused = self.counters.unsigned + self.counters.bad_signature;
+            if self.counters.frames + refused == 0 && self.position() > MAX_BYTES_BEFORE_FIRST_FRAME
+            {
+                self.gave_up = true;
+                return Ok(None);
+            }
             let avail = self.buf.len() - self.pos;
             // Enough for the timestamp, the longest frame and the next record's head.
             if avail < 8 + crate::protocol::frame::MAX_FRAME + 9 && !self.eof {

@@ -7,6 +7,7 @@ pub mod file;
 pub mod jsonl;
 pub mod matrix;
 pub mod plot;
+pub mod png;
 pub mod summary;
 pub mod summary_json;
 pub mod svg;
