@@ -259,7 +259,11 @@ pub struct MonitorArgs {
     /// device as MAVProxy's --master takes it: /dev/ttyUSB0,57600 or /dev/ttyUSB0 alone (57600
     /// baud). udp: and tcp: are udpin: and tcpout:, as in MAVProxy. Not udpout or udpbcast: the
     /// monitor sends nothing to the vehicle, so a UDP peer would never learn where to send.
-    pub conn: String,
+    /// Several connections (two radios to one vehicle, say) go into one monitor: a frame one
+    /// link has delivered is dropped when another delivers it too, so each fills the other's
+    /// gaps.
+    #[arg(value_name = "CONN", required = true, num_args = 1..)]
+    pub conns: Vec<String>,
     #[command(flatten)]
     pub run: RunArgs,
     /// No dashboard: decisions are printed as they happen (automatic when stdout is not a
@@ -356,8 +360,8 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub headless: bool,
     /// Draw every actuator's gamma and delta with both filters' bounds and the decisions
-    /// into this SVG file (`-`: standard output).
-    #[arg(long, value_name = "FILE.svg")]
+    /// into this file: SVG, or PNG when its name ends in .png (`-`: SVG on standard output).
+    #[arg(long, value_name = "FILE.svg|FILE.png")]
     pub plot: Option<PathBuf>,
 }
 

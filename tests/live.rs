@@ -240,6 +240,75 @@ fn one_system_id_from_two_senders_is_a_decision() {
     );
 }
 
+/// Two vehicles with one system id, each on its own link into one monitor: their frames
+/// have little in common (equal ones happen: both at rest), so they are no redundant links to
+/// merge; said as a decision once.
+#[test]
+fn one_system_id_on_two_links_with_few_frames_in_common_is_a_decision() {
+    let dir = common::temp_dir("live_two_links_two_vehicles");
+    let dec = dir.join("decisions.jsonl");
+    let ports = [free_udp_port(), free_udp_port()];
+    let monitor = Command::new(bin())
+        .arg("monitor")
+        .args(ports.map(|p| format!("udpin:127.0.0.1:{p}")))
+        .args(["--headless", "--exit-idle", "2", "--decisions"])
+        .arg(&dec)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let sims: Vec<_> = [
+        ("heli-swash2-loe-live", ports[0]),
+        ("quad-x-motor2-loe-live", ports[1]),
+    ]
+    .iter()
+    .map(|(scenario, port)| {
+        Command::new(bin())
+            .args([
+                "sim",
+                "--scenario",
+                scenario,
+                "--speed",
+                "10",
+                "--sysid",
+                "1",
+            ])
+            .arg("--out")
+            .arg(format!("udpout:127.0.0.1:{port}"))
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap()
+    })
+    .collect();
+    for sim in sims {
+        assert!(sim.wait_with_output().unwrap().status.success());
+    }
+    let out = monitor.wait_with_output().unwrap();
+    let (summary, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{err}");
+    // Said by the merging of the links; the decision (once per vehicle) may come first from
+    // the vehicle's clock going back and forth, which the monitor checks on every sample.
+    assert!(
+        err.contains("system 1 (component 1) arrives on links #1 and #2 at once with"),
+        "{err}"
+    );
+    let ds = decisions(&dec);
+    let mixed: Vec<&Value> = ds.iter().filter(|d| d["event"] == "contaminated").collect();
+    assert_eq!(mixed.len(), 1, "{mixed:?}\n{summary}");
+    assert_eq!(mixed[0]["sysid"], 1);
+    // Each link's own counters in the summary.
+    for port in ports {
+        assert!(
+            summary.contains(&format!("  udpin:127.0.0.1:{port}: frames ")),
+            "{summary}"
+        );
+    }
+}
+
 #[test]
 fn two_vehicles_at_once_keep_their_own_decisions() {
     let ds = run_live(

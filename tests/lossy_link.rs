@@ -60,27 +60,36 @@ impl SplitMix {
 struct Streamed {
     decisions: Vec<Value>,
     summary: String,
-    sent: usize,
+    /// Frames sent, on each link.
+    sent: Vec<usize>,
     dropped: usize,
+    /// Frames that went out on every link.
+    on_all: usize,
+    frames: usize,
 }
 
-/// `log` to a monitor over UDP, paced by its timestamps at `SPEED`, losing `LOSS` of it.
-fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path) -> Streamed {
+/// `log` to a monitor over UDP on `links` links at once, paced by its timestamps at `SPEED`,
+/// each link losing its own `LOSS` of it.
+fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path, links: usize) -> Streamed {
     let dec = dir.join("decisions.jsonl");
-    let port = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let mut args = vec![
-        "monitor".to_string(),
-        format!("udpin:127.0.0.1:{port}"),
+    let ports: Vec<u16> = (0..links)
+        .map(|_| {
+            std::net::UdpSocket::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap()
+                .port()
+        })
+        .collect();
+    let mut args = vec!["monitor".to_string()];
+    args.extend(ports.iter().map(|p| format!("udpin:127.0.0.1:{p}")));
+    args.extend([
         "--headless".into(),
         "--exit-idle".into(),
         "2".into(),
         "--decisions".into(),
         dec.to_str().unwrap().into(),
-    ];
+    ]);
     if let Some(p) = profile {
         args.extend(["--profile".into(), p.into()]);
     }
@@ -90,12 +99,12 @@ fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path) -> Streamed 
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Said once the socket is bound.
+    // Said once each socket is bound.
     let mut stderr = std::io::BufReader::new(monitor.stderr.take().unwrap());
     let mut line = String::new();
-    while std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0
-        && !line.contains("listening on")
-    {
+    let mut bound = 0;
+    while bound < links && std::io::BufRead::read_line(&mut stderr, &mut line).unwrap() > 0 {
+        bound += usize::from(line.contains("listening on"));
         line.clear();
     }
     let drain = std::thread::spawn(move || {
@@ -105,19 +114,28 @@ fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path) -> Streamed 
     });
     let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let entries = tlog_entries(log);
-    let mut rng = SplitMix(seed);
+    let mut rngs: Vec<SplitMix> = (0..links as u64)
+        .map(|k| SplitMix(seed + 1000 * k))
+        .collect();
     let (t0, started) = (entries[0].0, Instant::now());
-    let mut dropped = 0;
+    let (mut dropped, mut on_all) = (0, 0);
+    let mut sent = vec![0; links];
     for (ts, frame) in &entries {
         let due = Duration::from_secs_f64(ts.saturating_sub(t0) as f64 / 1e6 / SPEED);
         if let Some(wait) = due.checked_sub(started.elapsed()) {
             std::thread::sleep(wait);
         }
-        if rng.next_f64() < LOSS {
-            dropped += 1;
-            continue;
+        let mut on = 0;
+        for (k, port) in ports.iter().enumerate() {
+            if rngs[k].next_f64() < LOSS {
+                continue;
+            }
+            socket.send_to(frame, ("127.0.0.1", *port)).unwrap();
+            sent[k] += 1;
+            on += 1;
         }
-        socket.send_to(frame, ("127.0.0.1", port)).unwrap();
+        dropped += usize::from(on == 0);
+        on_all += usize::from(on == links);
     }
     let out = monitor.wait_with_output().unwrap();
     let err = drain.join().unwrap();
@@ -133,8 +151,10 @@ fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path) -> Streamed 
             .map(|l| serde_json::from_str(l).unwrap())
             .collect(),
         summary: String::from_utf8_lossy(&out.stdout).into_owned(),
-        sent: entries.len() - dropped,
+        sent,
         dropped,
+        on_all,
+        frames: entries.len(),
     }
 }
 
@@ -157,7 +177,7 @@ fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
             let log = root.join("replay/tlogs").join(&case.file);
             std::thread::spawn(move || {
                 let dir = common::temp_dir(&format!("lossy_link_{i}"));
-                let run = stream(&log, case.profile.as_deref(), 1 + i as u64, &dir);
+                let run = stream(&log, case.profile.as_deref(), 1 + i as u64, &dir, 1);
                 (case, run)
             })
         })
@@ -166,7 +186,7 @@ fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
         let (case, run) = handle.join().unwrap();
         let fault = case.fault.as_ref().unwrap();
         let onset = fault.onset_s.unwrap();
-        let share = run.dropped as f64 / (run.sent + run.dropped) as f64;
+        let share = run.dropped as f64 / run.frames as f64;
         assert!(
             (share - LOSS).abs() < 0.01,
             "{}: dropped {share:.3}",
@@ -189,10 +209,60 @@ fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
         assert!(delay < 5.0, "named {delay:.2} s after the onset: {report}");
         eprintln!(
             "{}: {} of {} packets lost; {} named {delay:.2} s after the onset",
-            case.file,
-            run.dropped,
-            run.sent + run.dropped,
-            first["actuator"]
+            case.file, run.dropped, run.frames, first["actuator"]
         );
     }
+}
+
+/// Two radios to one vehicle, each losing its own fifth of the frames, into one monitor: one
+/// stream that lost only the frames both lost (4 %), the copies dropped and counted, no
+/// `contaminated` decision, and the fault named as from one link.
+#[test]
+fn two_lossy_links_to_one_vehicle_fill_each_other_s_gaps() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("tests/datasets/sitl.toml");
+    let truth = DatasetTruth::from_toml(
+        &std::fs::read_to_string(&path).unwrap(),
+        &path.display().to_string(),
+    )
+    .unwrap();
+    let case = &truth.cases[0];
+    let log = root.join("replay/tlogs").join(&case.file);
+    let dir = common::temp_dir("lossy_link_two");
+    let run = stream(&log, case.profile.as_deref(), 7, &dir, 2);
+    let report = format!("{}\n{:?}", run.summary, run.decisions);
+    let share = run.dropped as f64 / run.frames as f64;
+    assert!(
+        (share - LOSS * LOSS).abs() < 0.01,
+        "lost on both: {share:.3}"
+    );
+    // Every frame sent on both links is one copy; the links' frames add up to what was sent.
+    let copies = format!("{} frames dropped as copies of another link's", run.on_all);
+    assert!(run.summary.contains(&copies), "want {copies:?}: {report}");
+    let total: usize = run.sent.iter().sum();
+    assert!(
+        run.summary.contains(&format!("link: frames {total} ")),
+        "want {total} frames: {report}"
+    );
+    assert!(
+        !run.decisions.iter().any(|d| d["event"] == "contaminated"),
+        "{report}"
+    );
+    let fault = case.fault.as_ref().unwrap();
+    let onset = fault.onset_s.unwrap();
+    let faults: Vec<&Value> = run
+        .decisions
+        .iter()
+        .filter(|d| d["event"] == "fault")
+        .collect();
+    assert!(
+        faults.iter().all(|d| d["t"].as_f64().unwrap() >= onset),
+        "{report}"
+    );
+    let first = faults
+        .first()
+        .unwrap_or_else(|| panic!("no fault: {report}"));
+    let channel = first["channel"].as_u64().unwrap() as u8;
+    assert!(fault.channels.contains(&channel), "{report}");
+    assert!(first["t"].as_f64().unwrap() - onset < 5.0, "{report}");
 }

@@ -43,10 +43,13 @@ impl Default for LiveOptions {
     }
 }
 
-/// What the reader saw, for the summary.
+/// What the readers saw, for the summary.
 #[derive(Debug, Clone, Default)]
 pub struct LiveCounters {
+    /// Every link's counters added up.
     pub link: FrameCounters,
+    /// Each link's own, in the order given.
+    pub per_link: Vec<FrameCounters>,
     /// Frames dropped because the estimating side fell behind (channel full).
     pub backpressure_drops: u64,
     /// Our own alert frames (component `ALERT_COMPID`) that came back in, ignored: a forwarder
@@ -54,16 +57,30 @@ pub struct LiveCounters {
     pub own_echo: u64,
     /// System ids heard from two senders at once, not yet made decisions.
     pub two_sources: Vec<(u8, String)>,
+    /// Frames another link had delivered already (several links), dropped.
+    pub copies: u64,
+    /// Links that failed while others went on: what each said.
+    pub failed_links: Vec<String>,
     /// From a frame's receive to the end of its processing (estimates, decisions written).
     pub processed: super::latency::Latency,
     /// The same, for the frames that wrote a decision.
     pub decided: super::latency::Latency,
 }
 
-/// Run until ctrl-c, the idle timeout or a fatal link error. Returns the counters. With
-/// `alerts`, the frames the sink's alert component queues are sent on that link.
+impl LiveCounters {
+    fn add_up(&mut self) {
+        self.link = FrameCounters::default();
+        for c in &self.per_link {
+            self.link.add(c);
+        }
+    }
+}
+
+/// Run until ctrl-c, the idle timeout, or every link failed. Returns the counters. Several
+/// links are merged (`protocol::merge`): a frame another link delivered already is dropped.
+/// With `alerts`, the frames the sink's alert component queues are sent on that link.
 pub async fn run(
-    mut link: Link,
+    links: Vec<Link>,
     monitor: &mut Monitor,
     sink: &mut ahcmon::output::jsonl::Outputs,
     mut alerts: Option<Link>,
@@ -71,57 +88,38 @@ pub async fn run(
     opts: LiveOptions,
 ) -> Result<LiveCounters, ConnError> {
     let clock = Instant::now();
-    // The reader's drop counters, for the dashboard's footer while running and for the
-    // summary if the reader does not hand back its final ones in time.
-    let live_counters = std::sync::Arc::new(std::sync::Mutex::new(LiveCounters::default()));
-    let reader_counters = live_counters.clone();
-    let (tx, mut rx) = mpsc::channel::<(Frame, Instant)>(opts.channel_capacity);
-    let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<LiveCounters, ConnError>>();
-    // Frames for the vehicle link (only SET_MESSAGE_INTERVAL, only with --request-rates).
-    let (vehicle_tx, mut vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
-    let spec = link.spec.to_string();
-    let reader = tokio::spawn(async move {
-        let mut drops = 0u64;
-        let result = loop {
-            tokio::select! {
-                Some(out) = vehicle_rx.recv() => {
-                    if let Err(e) = link.send(&out).await {
-                        break Err(e);
-                    }
-                }
-                r = link.recv_or_note() => match r {
-                    // (Under the dashboard, held until the terminal is restored.)
-                    Ok(Received::Note(note)) => tracing::info!("monitor: {spec}: {note}"),
-                    Ok(Received::TwoSources { sysid, detail }) => {
-                        tracing::warn!("monitor: {spec}: {detail}");
-                        if let Ok(mut c) = reader_counters.lock() {
-                            c.two_sources.push((sysid, detail));
-                        }
-                    }
-                    Ok(Received::Frame(frame)) => {
-                        if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send((frame, Instant::now())) {
-                            drops += 1;
-                        }
-                        if let Ok(mut c) = reader_counters.lock() {
-                            c.link = link.counters();
-                            c.backpressure_drops = drops;
-                        }
-                    }
-                    Err(e) => break Err(e),
-                },
-                () = tx.closed() => break Ok(()),
-            }
+    let count = links.len();
+    // The readers' drop counters, for the dashboard's footer while running and for the
+    // summary if a reader does not hand back its final ones in time.
+    let live_counters = std::sync::Arc::new(std::sync::Mutex::new(LiveCounters {
+        per_link: vec![FrameCounters::default(); count],
+        ..LiveCounters::default()
+    }));
+    let (tx, mut rx) = mpsc::channel::<(Frame, Instant, usize)>(opts.channel_capacity);
+    // Frames for each vehicle link (only SET_MESSAGE_INTERVAL, only with --request-rates).
+    let mut vehicle_txs = Vec::with_capacity(count);
+    let mut done = Vec::with_capacity(count);
+    let mut readers = Vec::with_capacity(count);
+    for (index, link) in links.into_iter().enumerate() {
+        let (vehicle_tx, vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
+        let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<(), ConnError>>();
+        vehicle_txs.push(vehicle_tx);
+        done.push(done_rx);
+        let reader = Reader {
+            link,
+            index,
+            others: count - 1,
+            tx: tx.clone(),
+            vehicle_rx,
+            counters: live_counters.clone(),
         };
-        let _ = done_tx.send(result.map(|()| {
-            let mut c = reader_counters
-                .lock()
-                .map(|c| c.clone())
-                .unwrap_or_default();
-            c.link = link.counters();
-            c.backpressure_drops = drops;
-            c
+        readers.push(tokio::spawn(async move {
+            let _ = done_tx.send(reader.run().await);
         }));
-    });
+    }
+    // The channel ends when every reader has.
+    drop(tx);
+    let mut merger = ahcmon::protocol::merge::Merger::default();
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
@@ -150,11 +148,17 @@ pub async fn run(
     loop {
         tokio::select! {
             frame = rx.recv() => {
-                let Some((frame, received)) = frame else { break };
+                let Some((frame, received, index)) = frame else { break };
                 // Our own alerts, echoed back in under the vehicle's system id, would keep a
                 // vehicle that has gone silent "alive" (no link_lost, no --exit-idle).
                 if sink.alerts.is_some() && frame.compid == ahcmon::output::alerts::ALERT_COMPID {
                     own_echo += 1;
+                    continue;
+                }
+                if count > 1
+                    && merger.accept(&frame, index, received.duration_since(clock).as_secs_f64())
+                        == ahcmon::protocol::merge::Verdict::Copy
+                {
                     continue;
                 }
                 let now = Instant::now();
@@ -167,7 +171,7 @@ pub async fn run(
                 }
                 if let Some(hz) = opts.request_rates {
                     for out in rates.on_frame(&frame, monitor, hz, sink) {
-                        let _ = vehicle_tx.send(out).await;
+                        let _ = vehicle_txs[index].send(out).await;
                     }
                 }
                 let decisions = sink.seen.len();
@@ -193,10 +197,14 @@ pub async fn run(
                     .stream_over
                     .as_ref()
                     .is_some_and(|o| o.load(std::sync::atomic::Ordering::Relaxed));
-                let mixed = live_counters
+                let mut mixed = live_counters
                     .lock()
                     .map(|mut c| std::mem::take(&mut c.two_sources))
                     .unwrap_or_default();
+                for (sysid, detail) in merger.take_two_sources() {
+                    tracing::warn!("monitor: {detail}");
+                    mixed.push((sysid, detail));
+                }
                 for (sysid, detail) in mixed {
                     if monitor.mark_mixed(sysid) {
                         sink.decision(&link_event(monitor, sysid, Event::Contaminated, detail));
@@ -244,7 +252,13 @@ pub async fn run(
                     if let ahcmon::output::dashboard::KeyAction::Quit = ui.keys(monitor) {
                         break;
                     }
-                    let counters = live_counters.lock().map(|c| c.link).unwrap_or_default();
+                    let counters = live_counters
+                        .lock()
+                        .map(|mut c| {
+                            c.add_up();
+                            c.link
+                        })
+                        .unwrap_or_default();
                     let age = any_frame.map(|t| now.duration_since(t).as_secs_f64());
                     // (Vehicles only: not a second ground station or a gimbal's own system.)
                     let vehicles: ahcmon::output::dashboard::VehicleLinks = last_seen
@@ -263,23 +277,98 @@ pub async fn run(
             Some(()) = next_signal(&mut hangup) => break,
         }
     }
-    // Closing the channel ends the reader, which hands back its counters.
+    // Closing the channel ends the readers, which hand back their counters.
     drop(rx);
     monitor.finish(sink);
-    let result = tokio::time::timeout(Duration::from_secs(1), done_rx).await;
-    reader.abort();
-    let result = match result {
-        Ok(Ok(r)) => r,
-        // The reader is stuck (e.g. a tcpin send waiting for a client): its counters as of
-        // its last frame, not zeros.
-        _ => Ok(live_counters.lock().map(|c| c.clone()).unwrap_or_default()),
-    };
-    result.map(|mut c| {
-        c.own_echo = own_echo;
-        c.processed = processed;
-        c.decided = decided;
-        c
-    })
+    let mut errors = Vec::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(1);
+    for d in done {
+        // A reader stuck (e.g. a tcpin send waiting for a client) keeps its counters as of
+        // its last frame.
+        if let Ok(Ok(Err(e))) = tokio::time::timeout_at(deadline, d).await {
+            errors.push(e);
+        }
+    }
+    for r in readers {
+        r.abort();
+    }
+    // Every link failed: the monitor failed (one link: as it always did).
+    if errors.len() == count
+        && let Some(e) = errors.into_iter().next()
+    {
+        return Err(e);
+    }
+    let mut c = live_counters.lock().map(|c| c.clone()).unwrap_or_default();
+    c.add_up();
+    c.own_echo = own_echo;
+    c.copies = merger.copies_total();
+    c.processed = processed;
+    c.decided = decided;
+    Ok(c)
+}
+
+/// One link's reader: frames into the shared channel (never blocking: a full channel drops,
+/// counted), the vehicle's outgoing frames onto the link.
+struct Reader {
+    link: Link,
+    index: usize,
+    /// Links besides this one: when there are some, this one failing is said and the
+    /// monitor goes on.
+    others: usize,
+    tx: mpsc::Sender<(Frame, Instant, usize)>,
+    vehicle_rx: mpsc::Receiver<Vec<u8>>,
+    counters: std::sync::Arc<std::sync::Mutex<LiveCounters>>,
+}
+
+impl Reader {
+    async fn run(mut self) -> Result<(), ConnError> {
+        let spec = self.link.spec.to_string();
+        let result = loop {
+            tokio::select! {
+                Some(out) = self.vehicle_rx.recv() => {
+                    if let Err(e) = self.link.send(&out).await {
+                        break Err(e);
+                    }
+                }
+                r = self.link.recv_or_note() => match r {
+                    // (Under the dashboard, held until the terminal is restored.)
+                    Ok(Received::Note(note)) => tracing::info!("monitor: {spec}: {note}"),
+                    Ok(Received::TwoSources { sysid, detail }) => {
+                        tracing::warn!("monitor: {spec}: {detail}");
+                        if let Ok(mut c) = self.counters.lock() {
+                            c.two_sources.push((sysid, detail));
+                        }
+                    }
+                    Ok(Received::Frame(frame)) => {
+                        let full = matches!(
+                            self.tx.try_send((frame, Instant::now(), self.index)),
+                            Err(mpsc::error::TrySendError::Full(_))
+                        );
+                        if let Ok(mut c) = self.counters.lock() {
+                            c.per_link[self.index] = self.link.counters();
+                            c.backpressure_drops += u64::from(full);
+                        }
+                    }
+                    Err(e) => break Err(e),
+                },
+                () = self.tx.closed() => break Ok(()),
+            }
+        };
+        if let Ok(mut c) = self.counters.lock() {
+            c.per_link[self.index] = self.link.counters();
+            if let Err(e) = &result
+                && self.others > 0
+            {
+                c.failed_links.push(format!("{spec}: {e}"));
+            }
+        }
+        if let Err(e) = &result
+            && self.others > 0
+        {
+            tracing::warn!("monitor: {spec} failed ({e}); the other links go on");
+        }
+        result
+    }
 }
 
 /// Drain the alert component's queue onto the alert link (a failed send is not fatal: the

@@ -15,7 +15,7 @@ use std::io::IsTerminal;
 
 pub fn run(a: MonitorArgs) -> anyhow::Result<()> {
     let MonitorArgs {
-        conn,
+        conns,
         run,
         link_timeout,
         exit_idle,
@@ -24,7 +24,7 @@ pub fn run(a: MonitorArgs) -> anyhow::Result<()> {
         request_rates,
     } = a;
     monitor(
-        &conn,
+        &conns,
         &run,
         MonitorOptions {
             link_timeout,
@@ -82,7 +82,7 @@ pub fn demo(a: DemoArgs) -> anyhow::Result<()> {
         !headless && std::io::stdout().is_terminal() && !ahcmon::output::file::stdout_taken();
     let idle = (!dashboard).then_some((1.5 / speed).max(0.5));
     monitor(
-        "udpin:127.0.0.1:0",
+        &["udpin:127.0.0.1:0".to_string()],
         &args,
         MonitorOptions {
             link_timeout: 2.0,
@@ -110,7 +110,7 @@ struct MonitorOptions {
 }
 
 fn monitor(
-    conn: &str,
+    conns: &[String],
     args: &RunArgs,
     o: MonitorOptions,
     demo: Option<DemoVehicle>,
@@ -123,15 +123,23 @@ fn monitor(
         headless,
     } = o;
     let alerts = alerts.as_deref();
-    let spec: ConnSpec = conn.parse()?;
-    // A UDP peer sends to addresses it has heard from, and the monitor says nothing on the
-    // vehicle link: from udpout or udpbcast it would wait forever.
-    if let ConnSpec::UdpOut(a) | ConnSpec::UdpBcast(a) = &spec {
-        let port = a.port();
-        return Err(UsageError(format!(
-            "monitor {spec}: the monitor sends nothing to the vehicle, so a UDP peer would never learn where to send; have the autopilot or router send to this machine and listen with udpin:0.0.0.0:{port} (MAVProxy: --out=udp:THIS_HOST:{port})"
-        ))
-        .into());
+    let specs = conns
+        .iter()
+        .map(|c| c.parse::<ConnSpec>())
+        .collect::<Result<Vec<_>, _>>()?;
+    for (k, spec) in specs.iter().enumerate() {
+        // A UDP peer sends to addresses it has heard from, and the monitor says nothing on the
+        // vehicle link: from udpout or udpbcast it would wait forever.
+        if let ConnSpec::UdpOut(a) | ConnSpec::UdpBcast(a) = spec {
+            let port = a.port();
+            return Err(UsageError(format!(
+                "monitor {spec}: the monitor sends nothing to the vehicle, so a UDP peer would never learn where to send; have the autopilot or router send to this machine and listen with udpin:0.0.0.0:{port} (MAVProxy: --out=udp:THIS_HOST:{port})"
+            ))
+            .into());
+        }
+        if specs[..k].contains(spec) {
+            return Err(UsageError(format!("monitor: {spec} is given twice")).into());
+        }
     }
     // The dashboard unless asked not to, or when stdout is not a terminal (CI, pipes).
     let dashboard =
@@ -167,24 +175,30 @@ fn monitor(
     }
     let rt = runtime()?;
     let result = rt.block_on(async {
-        let mut link = Link::open(spec.clone()).await?;
-        if let Some(s) = signing {
-            link.set_signing(s);
+        let mut links = Vec::with_capacity(specs.len());
+        for spec in &specs {
+            let mut link = Link::open(spec.clone()).await?;
+            if let Some(s) = &signing {
+                link.set_signing(s.clone());
+            }
+            let verb = match spec {
+                ConnSpec::UdpIn(_) | ConnSpec::TcpIn(_) => "listening on",
+                ConnSpec::UdpOut(_) | ConnSpec::UdpBcast(_) => "sending to",
+                ConnSpec::TcpOut(_) => "connected to",
+                ConnSpec::Serial(..) => "reading",
+            };
+            match link.not_connected() {
+                Some(why) => tracing::warn!("monitor: {spec}: {why}; retrying every second"),
+                None => tracing::info!(
+                    "monitor: {verb} {spec}{}",
+                    link.local_addr()
+                        .map_or(String::new(), |a| format!(" (local {a})"))
+                ),
+            }
+            links.push(link);
         }
-        let local = link.local_addr();
-        let verb = match spec {
-            ConnSpec::UdpIn(_) | ConnSpec::TcpIn(_) => "listening on",
-            ConnSpec::UdpOut(_) | ConnSpec::UdpBcast(_) => "sending to",
-            ConnSpec::TcpOut(_) => "connected to",
-            ConnSpec::Serial(..) => "reading",
-        };
-        match link.not_connected() {
-            Some(why) => tracing::warn!("monitor: {spec}: {why}; retrying every second"),
-            None => tracing::info!(
-                "monitor: {verb} {spec}{}",
-                local.map_or(String::new(), |a| format!(" (local {a})"))
-            ),
-        }
+        // The first link's address: the demo's vehicle sends to it.
+        let local = links.first().and_then(Link::local_addr);
         let alert_link = match &alerts {
             Some(a) => {
                 tracing::info!("monitor: alerts to {a} (sysid of the vehicle, component 191)");
@@ -227,12 +241,17 @@ fn monitor(
         let held = dashboard.then(super::log::hold);
         let mut ui = if dashboard {
             files.echo = false;
-            // The address actually bound (the demo's udpin:127.0.0.1:0 showed port 0).
-            let shown = match (&spec, local) {
-                (ConnSpec::UdpIn(_), Some(a)) => format!("udpin:{a}"),
-                (ConnSpec::TcpIn(_), Some(a)) => format!("tcpin:{a}"),
-                _ => spec.to_string(),
-            };
+            // The addresses actually bound (the demo's udpin:127.0.0.1:0 showed port 0).
+            let shown: Vec<String> = specs
+                .iter()
+                .zip(&links)
+                .map(|(spec, link)| match (spec, link.local_addr()) {
+                    (ConnSpec::UdpIn(_), Some(a)) => format!("udpin:{a}"),
+                    (ConnSpec::TcpIn(_), Some(a)) => format!("tcpin:{a}"),
+                    _ => spec.to_string(),
+                })
+                .collect();
+            let shown = shown.join(" + ");
             let mut ui = ahcmon::output::dashboard::TerminalUi::start(&shown)
                 .context("cannot start the dashboard (try --headless)")?;
             if let Some(script) = script {
@@ -244,7 +263,7 @@ fn monitor(
             None
         };
         let counters = super::live::run(
-            link,
+            links,
             &mut monitor,
             &mut files,
             alert_link,
@@ -285,6 +304,18 @@ fn monitor(
     };
     out!("{}", summary::render(&monitor, &counters.link, &files.seen));
     let summary_written = args.write_summary(&monitor, &counters.link, &files.seen);
+    if counters.per_link.len() > 1 {
+        for (spec, c) in specs.iter().zip(&counters.per_link) {
+            outln!("  {spec}: {c}");
+        }
+        outln!(
+            "{} frames dropped as copies of another link's (the links carry the same vehicle)",
+            counters.copies
+        );
+    }
+    for failed in &counters.failed_links {
+        outln!("link failed, the others went on: {failed}");
+    }
     if counters.backpressure_drops > 0 {
         outln!(
             "{} frames dropped: the estimators fell behind",

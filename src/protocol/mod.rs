@@ -10,6 +10,7 @@ pub mod dialects {
 }
 
 pub mod frame;
+pub mod merge;
 pub mod signing;
 
 pub use dialects::ahcmon::MavMessage;
