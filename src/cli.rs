@@ -259,9 +259,10 @@ pub struct MonitorArgs {
     /// device as MAVProxy's --master takes it: /dev/ttyUSB0,57600 or /dev/ttyUSB0 alone (57600
     /// baud). udp: and tcp: are udpin: and tcpout:, as in MAVProxy. Not udpout or udpbcast: the
     /// monitor sends nothing to the vehicle, so a UDP peer would never learn where to send.
-    /// Several connections (two radios to one vehicle, say) go into one monitor: a frame one
-    /// link has delivered is dropped when another delivers it too, so each fills the other's
-    /// gaps.
+    /// Several connections go into one monitor. For one stream by two paths (a port split to
+    /// two radios, a forward beside its radio) a frame one link has delivered is dropped when
+    /// another delivers it too. Two ports of one autopilot are no two paths: each numbers its
+    /// own frames (docs/telemetry.md).
     #[arg(value_name = "CONN", required = true, num_args = 1..)]
     pub conns: Vec<String>,
     #[command(flatten)]

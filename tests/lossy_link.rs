@@ -65,12 +65,21 @@ struct Streamed {
     dropped: usize,
     /// Frames that went out on every link.
     on_all: usize,
+
     frames: usize,
 }
 
-/// `log` to a monitor over UDP on `links` links at once, paced by its timestamps at `SPEED`,
-/// each link losing its own `LOSS` of it.
-fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path, links: usize) -> Streamed {
+/// `log` to a monitor over UDP on one link per entry of `delays` at once, paced by its
+/// timestamps at `SPEED`, each link losing its own `LOSS` of it and sending each frame its
+/// delay (wall clock) late.
+fn stream(
+    log: &Path,
+    profile: Option<&str>,
+    seed: u64,
+    dir: &Path,
+    delays: &[Duration],
+) -> Streamed {
+    let links = delays.len();
     let dec = dir.join("decisions.jsonl");
     let ports: Vec<u16> = (0..links)
         .map(|_| {
@@ -112,30 +121,45 @@ fn stream(log: &Path, profile: Option<&str>, seed: u64, dir: &Path, links: usize
         stderr.read_to_string(&mut rest).ok();
         rest
     });
-    let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    let entries = tlog_entries(log);
-    let mut rngs: Vec<SplitMix> = (0..links as u64)
-        .map(|k| SplitMix(seed + 1000 * k))
+    let entries = std::sync::Arc::new(tlog_entries(log));
+    // Which frames each link carries, drawn before any is sent.
+    let carried: Vec<Vec<bool>> = (0..links as u64)
+        .map(|k| {
+            let mut rng = SplitMix(seed + 1000 * k);
+            entries.iter().map(|_| rng.next_f64() >= LOSS).collect()
+        })
         .collect();
-    let (t0, started) = (entries[0].0, Instant::now());
-    let (mut dropped, mut on_all) = (0, 0);
-    let mut sent = vec![0; links];
-    for (ts, frame) in &entries {
-        let due = Duration::from_secs_f64(ts.saturating_sub(t0) as f64 / 1e6 / SPEED);
-        if let Some(wait) = due.checked_sub(started.elapsed()) {
-            std::thread::sleep(wait);
-        }
-        let mut on = 0;
-        for (k, port) in ports.iter().enumerate() {
-            if rngs[k].next_f64() < LOSS {
-                continue;
-            }
-            socket.send_to(frame, ("127.0.0.1", *port)).unwrap();
-            sent[k] += 1;
-            on += 1;
-        }
-        dropped += usize::from(on == 0);
-        on_all += usize::from(on == links);
+    let on = |i: usize| carried.iter().filter(|c| c[i]).count();
+    let dropped = (0..entries.len()).filter(|&i| on(i) == 0).count();
+    let on_all = (0..entries.len()).filter(|&i| on(i) == links).count();
+
+    let sent: Vec<usize> = carried
+        .iter()
+        .map(|c| c.iter().filter(|&&x| x).count())
+        .collect();
+    let started = Instant::now();
+    let senders: Vec<_> = (0..links)
+        .map(|k| {
+            let (entries, keep, port, delay) =
+                (entries.clone(), carried[k].clone(), ports[k], delays[k]);
+            std::thread::spawn(move || {
+                let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+                let t0 = entries[0].0;
+                for ((ts, frame), keep) in entries.iter().zip(keep) {
+                    let due =
+                        Duration::from_secs_f64(ts.saturating_sub(t0) as f64 / 1e6 / SPEED) + delay;
+                    if let Some(wait) = due.checked_sub(started.elapsed()) {
+                        std::thread::sleep(wait);
+                    }
+                    if keep {
+                        socket.send_to(frame, ("127.0.0.1", port)).unwrap();
+                    }
+                }
+            })
+        })
+        .collect();
+    for s in senders {
+        s.join().unwrap();
     }
     let out = monitor.wait_with_output().unwrap();
     let err = drain.join().unwrap();
@@ -177,7 +201,13 @@ fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
             let log = root.join("replay/tlogs").join(&case.file);
             std::thread::spawn(move || {
                 let dir = common::temp_dir(&format!("lossy_link_{i}"));
-                let run = stream(&log, case.profile.as_deref(), 1 + i as u64, &dir, 1);
+                let run = stream(
+                    &log,
+                    case.profile.as_deref(),
+                    1 + i as u64,
+                    &dir,
+                    &[Duration::ZERO],
+                );
                 (case, run)
             })
         })
@@ -214,11 +244,23 @@ fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
     }
 }
 
-/// Two radios to one vehicle, each losing its own fifth of the frames, into one monitor: one
-/// stream that lost only the frames both lost (4 %), the copies dropped and counted, no
-/// `contaminated` decision, and the fault named as from one link.
-#[test]
-fn two_lossy_links_to_one_vehicle_fill_each_other_s_gaps() {
+/// The number before `what` in `text` (`"123 frames dropped"`).
+fn count_before(text: &str, what: &str) -> usize {
+    let at = text
+        .find(what)
+        .unwrap_or_else(|| panic!("no {what:?} in {text}"));
+    text[..at]
+        .split_whitespace()
+        .last()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+/// One stream reaching the monitor by two paths (a port split to two radios), each losing its
+/// own fifth of the frames: the copies dropped and counted, no `contaminated` decision, every
+/// frame the monitor misses accounted for, and the fault named as from one link.
+fn two_paths(second_path_delay: Duration, name: &str) -> (Streamed, usize, usize) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let path = root.join("tests/datasets/sitl.toml");
     let truth = DatasetTruth::from_toml(
@@ -228,22 +270,40 @@ fn two_lossy_links_to_one_vehicle_fill_each_other_s_gaps() {
     .unwrap();
     let case = &truth.cases[0];
     let log = root.join("replay/tlogs").join(&case.file);
-    let dir = common::temp_dir("lossy_link_two");
-    let run = stream(&log, case.profile.as_deref(), 7, &dir, 2);
+    let dir = common::temp_dir(name);
+    let run = stream(
+        &log,
+        case.profile.as_deref(),
+        7,
+        &dir,
+        &[Duration::ZERO, second_path_delay],
+    );
     let report = format!("{}\n{:?}", run.summary, run.decisions);
     let share = run.dropped as f64 / run.frames as f64;
     assert!(
         (share - LOSS * LOSS).abs() < 0.01,
         "lost on both: {share:.3}"
     );
-    // Every frame sent on both links is one copy; the links' frames add up to what was sent.
-    let copies = format!("{} frames dropped as copies of another link's", run.on_all);
-    assert!(run.summary.contains(&copies), "want {copies:?}: {report}");
+    // Every frame sent on both paths is one copy; the links' frames add up to what was sent.
+    let copies = count_before(&run.summary, "frames dropped as copies of another link's");
+    assert_eq!(copies, run.on_all, "{report}");
     let total: usize = run.sent.iter().sum();
     assert!(
         run.summary.contains(&format!("link: frames {total} ")),
         "want {total} frames: {report}"
     );
+    // The monitor handles each frame some path delivered, once, less the late ones; none
+    // reaches it out of order.
+    let late = count_before(&run.summary, "as late");
+    let handled: usize = run
+        .summary
+        .lines()
+        .find(|l| l.starts_with("latency from a frame's receive"))
+        .and_then(|l| l.rsplit_once(" over "))
+        .and_then(|(_, n)| n.trim_end_matches(" frames").parse().ok())
+        .unwrap_or_else(|| panic!("no latency line: {report}"));
+    assert_eq!(handled, run.frames - run.dropped - late, "{report}");
+    assert_eq!(count_before(&run.summary, "reordered"), 0, "{report}");
     assert!(
         !run.decisions.iter().any(|d| d["event"] == "contaminated"),
         "{report}"
@@ -265,4 +325,35 @@ fn two_lossy_links_to_one_vehicle_fill_each_other_s_gaps() {
     let channel = first["channel"].as_u64().unwrap() as u8;
     assert!(fault.channels.contains(&channel), "{report}");
     assert!(first["t"].as_f64().unwrap() - onset < 5.0, "{report}");
+    (run, late, handled)
+}
+
+/// Both paths at once: the monitor gets more than either path alone. (At 10x real time
+/// frames are 0.4 ms apart, so a fill often comes after the sender's next frame: late.)
+#[test]
+fn two_lossy_paths_to_one_vehicle_fill_each_other_s_gaps() {
+    let (run, late, handled) = two_paths(Duration::ZERO, "lossy_link_two");
+    let best = run.sent.iter().max().copied().unwrap_or(0);
+    assert!(
+        handled > best,
+        "{handled} handled, the better path alone {best} ({late} late)"
+    );
+}
+
+/// The second path 5 ms behind (50 ms of the vehicle's clock at 10x, several frames): its
+/// fills come after the sender's next frame and are dropped as late, never passed on out of
+/// order; the monitor misses what the first path lost, and decides as from it alone.
+#[test]
+fn a_slower_second_path_s_late_fills_do_not_mix_the_stream() {
+    let (run, late, handled) = two_paths(Duration::from_millis(5), "lossy_link_two_delayed");
+    let first_lost = run.frames - run.sent[0];
+    assert!(
+        late > first_lost / 2,
+        "{late} late of {first_lost} lost on the first path"
+    );
+    assert!(
+        handled >= run.sent[0],
+        "{handled} handled of {}",
+        run.sent[0]
+    );
 }

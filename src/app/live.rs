@@ -57,8 +57,12 @@ pub struct LiveCounters {
     pub own_echo: u64,
     /// System ids heard from two senders at once, not yet made decisions.
     pub two_sources: Vec<(u8, String)>,
-    /// Frames another link had delivered already (several links), dropped.
+    /// Several links: frames another link had delivered already, frames behind a newer one
+    /// another link delivered (`protocol::merge`), both dropped; remembered frames forgotten
+    /// early (over the merge's cap).
     pub copies: u64,
+    pub late: u64,
+    pub merge_evicted: u64,
     /// Links that failed while others went on: what each said.
     pub failed_links: Vec<String>,
     /// From a frame's receive to the end of its processing (estimates, decisions written).
@@ -100,6 +104,8 @@ pub async fn run(
     let mut vehicle_txs = Vec::with_capacity(count);
     let mut done = Vec::with_capacity(count);
     let mut readers = Vec::with_capacity(count);
+    let names: Vec<String> = links.iter().map(|l| l.spec.to_string()).collect();
+    let alive = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(count));
     for (index, link) in links.into_iter().enumerate() {
         let (vehicle_tx, vehicle_rx) = mpsc::channel::<Vec<u8>>(16);
         let (done_tx, done_rx) = tokio::sync::oneshot::channel::<Result<(), ConnError>>();
@@ -108,7 +114,7 @@ pub async fn run(
         let reader = Reader {
             link,
             index,
-            others: count - 1,
+            alive: alive.clone(),
             tx: tx.clone(),
             vehicle_rx,
             counters: live_counters.clone(),
@@ -119,7 +125,7 @@ pub async fn run(
     }
     // The channel ends when every reader has.
     drop(tx);
-    let mut merger = ahcmon::protocol::merge::Merger::default();
+    let mut merger = ahcmon::protocol::merge::Merger::new(names);
     let mut last_seen: BTreeMap<u8, Instant> = BTreeMap::new();
     let mut lost: BTreeMap<u8, bool> = BTreeMap::new();
     let mut any_frame: Option<Instant> = None;
@@ -157,7 +163,7 @@ pub async fn run(
                 }
                 if count > 1
                     && merger.accept(&frame, index, received.duration_since(clock).as_secs_f64())
-                        == ahcmon::protocol::merge::Verdict::Copy
+                        != ahcmon::protocol::merge::Verdict::New
                 {
                     continue;
                 }
@@ -170,8 +176,11 @@ pub async fn run(
                     }
                 }
                 if let Some(hz) = opts.request_rates {
+                    // Never waiting: a link stuck sending must not hold the others' frames.
+                    // A request that finds its link's queue full is lost, and the report
+                    // of COMMAND_ACKs shows it missing.
                     for out in rates.on_frame(&frame, monitor, hz, sink) {
-                        let _ = vehicle_txs[index].send(out).await;
+                        let _ = vehicle_txs[index].try_send(out);
                     }
                 }
                 let decisions = sink.seen.len();
@@ -292,7 +301,7 @@ pub async fn run(
     for r in readers {
         r.abort();
     }
-    // Every link failed: the monitor failed (one link: as it always did).
+    // Every link failed: the monitor failed.
     if errors.len() == count
         && let Some(e) = errors.into_iter().next()
     {
@@ -302,6 +311,8 @@ pub async fn run(
     c.add_up();
     c.own_echo = own_echo;
     c.copies = merger.copies_total();
+    c.late = merger.late;
+    c.merge_evicted = merger.evicted;
     c.processed = processed;
     c.decided = decided;
     Ok(c)
@@ -312,9 +323,9 @@ pub async fn run(
 struct Reader {
     link: Link,
     index: usize,
-    /// Links besides this one: when there are some, this one failing is said and the
+    /// Links whose readers still run: while one does, this one failing is said and the
     /// monitor goes on.
-    others: usize,
+    alive: std::sync::Arc<std::sync::atomic::AtomicUsize>,
     tx: mpsc::Sender<(Frame, Instant, usize)>,
     vehicle_rx: mpsc::Receiver<Vec<u8>>,
     counters: std::sync::Arc<std::sync::Mutex<LiveCounters>>,
@@ -354,16 +365,20 @@ impl Reader {
                 () = self.tx.closed() => break Ok(()),
             }
         };
+        let others = self
+            .alive
+            .fetch_sub(1, std::sync::atomic::Ordering::SeqCst)
+            .saturating_sub(1);
         if let Ok(mut c) = self.counters.lock() {
             c.per_link[self.index] = self.link.counters();
             if let Err(e) = &result
-                && self.others > 0
+                && others > 0
             {
                 c.failed_links.push(format!("{spec}: {e}"));
             }
         }
         if let Err(e) = &result
-            && self.others > 0
+            && others > 0
         {
             tracing::warn!("monitor: {spec} failed ({e}); the other links go on");
         }

@@ -124,10 +124,24 @@ impl RunArgs {
         frames: &ahcmon::protocol::FrameCounters,
         decisions: &[ahcmon::diagnose::vehicle::Decision],
     ) -> anyhow::Result<()> {
+        self.write_summary_with(monitor, frames, decisions, None)
+    }
+
+    /// The summary, with `links` (several links' own counters and their merge) beside `link`.
+    pub fn write_summary_with(
+        &self,
+        monitor: &ahcmon::monitor::Monitor,
+        frames: &ahcmon::protocol::FrameCounters,
+        decisions: &[ahcmon::diagnose::vehicle::Decision],
+        links: Option<serde_json::Value>,
+    ) -> anyhow::Result<()> {
         let Some(p) = &self.summary else {
             return Ok(());
         };
-        let doc = ahcmon::output::summary_json::summary_json(monitor, frames, decisions);
+        let mut doc = ahcmon::output::summary_json::summary_json(monitor, frames, decisions);
+        if let Some(links) = links {
+            doc["links"] = links;
+        }
         let text = serde_json::to_string_pretty(&doc)? + "\n";
         ahcmon::output::file::write_whole(p, text.as_bytes())
             .with_context(|| format!("cannot write {}", p.display()))

@@ -303,15 +303,38 @@ fn monitor(
         }
     };
     out!("{}", summary::render(&monitor, &counters.link, &files.seen));
-    let summary_written = args.write_summary(&monitor, &counters.link, &files.seen);
+    // Several links: each one's counters (`link` adds them up, copies included) and what the
+    // merge dropped.
+    let links = (counters.per_link.len() > 1).then(|| {
+        let each: Vec<serde_json::Value> = specs
+            .iter()
+            .zip(&counters.per_link)
+            .map(|(spec, c)| serde_json::json!({"conn": spec.to_string(), "counters": c}))
+            .collect();
+        serde_json::json!({
+            "each": each,
+            "copies": counters.copies,
+            "late": counters.late,
+            "merge_evicted": counters.merge_evicted,
+            "failed": counters.failed_links,
+        })
+    });
+    let summary_written = args.write_summary_with(&monitor, &counters.link, &files.seen, links);
     if counters.per_link.len() > 1 {
         for (spec, c) in specs.iter().zip(&counters.per_link) {
             outln!("  {spec}: {c}");
         }
         outln!(
-            "{} frames dropped as copies of another link's (the links carry the same vehicle)",
-            counters.copies
+            "{} frames dropped as copies of another link's, {} as late (behind a newer frame of their sender that another link delivered: the filters step forward in time)",
+            counters.copies,
+            counters.late
         );
+        if counters.merge_evicted > 0 {
+            outln!(
+                "{} remembered frames forgotten before their 0.5 s (over the merge's cap): their copies may have passed",
+                counters.merge_evicted
+            );
+        }
     }
     for failed in &counters.failed_links {
         outln!("link failed, the others went on: {failed}");

@@ -22,9 +22,9 @@ const CHUNK: usize = 64 * 1024;
 const MAX_TS_JUMP_US: u64 = 86_400_000_000;
 /// Good frames in a row that move the reader's clock to theirs.
 const REANCHOR_FRAMES: u32 = 3;
-/// A telemetry log's first frame is in its first few hundred bytes; an input with no good
-/// frame in this many is no telemetry log (and an endless one, `/dev/zero`, would be read
-/// until stopped).
+/// An input that is no regular file (a device, a pipe) with no good frame in this many bytes
+/// is no telemetry log: an endless one (`/dev/zero`) would be read until stopped. A regular
+/// file is read to its end, so a log with a long damaged head (a recovered card) is still read.
 pub const MAX_BYTES_BEFORE_FIRST_FRAME: u64 = 1 << 20;
 
 pub struct TlogReader<R: Read> {
@@ -43,13 +43,21 @@ pub struct TlogReader<R: Read> {
     pub counters: FrameCounters,
     /// With a key, only frames signed with it pass (`protocol::signing`).
     pub signing: Option<crate::protocol::signing::Signing>,
-    /// The reader stopped: `MAX_BYTES_BEFORE_FIRST_FRAME` read and no good frame in them.
+    /// Stop after this many bytes with no good frame (`None`: read to the end).
+    pub give_up_after: Option<u64>,
+    /// The reader stopped: `give_up_after` bytes read and no good frame in them.
     pub gave_up: bool,
 }
 
 impl TlogReader<File> {
     pub fn open(path: &Path) -> io::Result<Self> {
-        Ok(Self::new(File::open(path)?))
+        let file = File::open(path)?;
+        let regular = file.metadata()?.is_file();
+        let mut reader = Self::new(file);
+        if regular {
+            reader.give_up_after = None;
+        }
+        Ok(reader)
     }
 }
 
@@ -67,6 +75,7 @@ impl<R: Read> TlogReader<R> {
             base: 0,
             counters: FrameCounters::default(),
             signing: None,
+            give_up_after: Some(MAX_BYTES_BEFORE_FIRST_FRAME),
             gave_up: false,
         }
     }
@@ -156,7 +165,8 @@ impl<R: Read> TlogReader<R> {
     pub fn next_frame(&mut self) -> io::Result<Option<(u64, Frame)>> {
         loop {
             let refused = self.counters.unsigned + self.counters.bad_signature;
-            if self.counters.frames + refused == 0 && self.position() > MAX_BYTES_BEFORE_FIRST_FRAME
+            if self.counters.frames + refused == 0
+                && self.give_up_after.is_some_and(|n| self.position() > n)
             {
                 self.gave_up = true;
                 return Ok(None);

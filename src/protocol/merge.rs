@@ -1,23 +1,34 @@
-//! Several links into one monitor (two radios to one vehicle, a serial link beside a UDP
-//! forward): a frame another link has already delivered is dropped, so a vehicle heard on two
-//! links is one stream, each link filling the other's losses.
+//! Several links into one monitor that carry the *same frames* by two paths: a vehicle port
+//! split to two radios, a forward (mavlink-router, MAVProxy `--out`) beside the radio it
+//! forwards. A frame another link has already delivered is dropped, so each link fills the
+//! other's gaps. (Two ports of one autopilot are not that: each port numbers and times its
+//! own frames, so no frame is a copy; see *Two sources*.)
 //!
 //! **Copy.** A frame is a copy when a frame with the same system id, component id, sequence
 //! number, message id and payload came in on *another* link within [`COPY_WINDOW_S`]. The
-//! sender numbers its frames per component, so the two links' copies of one frame agree on
-//! all five; two different frames agree on all five only when a component sends the same
-//! payload again 256·k frames later inside the window, a repeat that carries nothing new. A
-//! repeat on the *same* link is not dropped here: it is that link's own duplicate, and the
-//! monitor counts it (`contaminated`).
+//! sender numbers its frames per component and port, so the two paths' copies of one frame
+//! agree on all five; two different frames agree on all five only when a component sends the
+//! same payload again 256·k frames later inside the window, a repeat that carries nothing
+//! new. The payload is compared as MAVLink 2 serialises it, so a v1 and a v2 copy match.
 //!
-//! **Two sources.** Redundant links share most frames; two vehicles with one system id on two
-//! links share only the frames that happen to be equal (both at rest, a constant message;
-//! 1.5 % between a simulated helicopter and quad). A component's frames are counted in blocks
-//! of [`SOURCES_BLOCK`] while two links deliver it within [`TWO_SOURCES_WITHIN_S`] of each
-//! other; a block with under [`MIN_COPY_SHARE`] copies is two sources, said once per system id
-//! ([`Merger::take_two_sources`]). Two links losing p₁ and p₂ of the frames give a copy share
-//! of (1-p₁)(1-p₂) / ((1-p₁)+(1-p₂)): 40 % at a fifth lost on each, 5 % only at 90 % lost on
-//! both.
+//! **Late.** A frame no link delivered before is still dropped when a *newer* frame of its
+//! component came in on another link: by sequence number (ahead by 1-127, half the wrap), or,
+//! for the messages that carry the vehicle's clock (ATTITUDE, SERVO_OUTPUT_RAW, RAW_IMU,
+//! HIGHRES_IMU, ACTUATOR_OUTPUT_STATUS), by that stamp against the newest of its message, which
+//! holds for a path any number of frames behind. The filters step forward in time and would
+//! drop such a frame as out of order, and counted there it would read as a mixed stream. So a
+//! gap is filled when the other path's copy comes before the sender's next frame. A link's own
+//! reordering (the newest frame was its own) is left to the monitor to count, as with one
+//! link.
+//!
+//! **Two sources.** Two paths of one stream share most frames: losing p₁ and p₂ of them, a
+//! share (1-p₁)(1-p₂) / ((1-p₁)+(1-p₂)) of what arrives is copies, 40 % at a fifth lost on
+//! each and 5 % only at 90 % lost on both. Two vehicles with one system id, or two ports of
+//! one autopilot, share only frames that happen to be equal (3.2 % between a simulated
+//! helicopter and quad at rest and flying). A component's frames are judged in blocks of
+//! [`SOURCES_BLOCK`] received while two links deliver it (within [`TWO_SOURCES_WITHIN_S`] of
+//! each other); a block with under [`MIN_COPY_SHARE`] copies is said once per system id
+//! ([`Merger::take_two_sources`]).
 //!
 //! Memory is bounded: the frames of the last [`COPY_WINDOW_S`] are kept as 8-byte keys, at most
 //! [`MAX_RECENT`] of them (older ones evicted first, counted).
@@ -27,7 +38,7 @@ use mavlink_core::Message as _;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::hash::{Hash, Hasher};
 
-/// How long a delivered frame is remembered for its copies (s): links to one vehicle differ
+/// How long a delivered frame is remembered for its copies (s): paths to one vehicle differ
 /// in delay by tens of ms (a radio against a network forward); half a second covers that with
 /// room.
 pub const COPY_WINDOW_S: f64 = 0.5;
@@ -47,19 +58,56 @@ pub enum Verdict {
     New,
     /// Another link delivered it already: dropped.
     Copy,
+    /// Another link delivered a newer frame of its component already: dropped.
+    Late,
 }
 
-/// Per component: when each link last delivered a frame of it; the frames and copies of the
-/// block under way, received while two links were delivering.
+/// A message's stamp on the vehicle's clock, as sent (wrapping u32 or u64).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stamp {
+    Wrapping(u32),
+    Wide(u64),
+}
+
+impl Stamp {
+    fn of(msg: &super::MavMessage) -> Option<Self> {
+        use super::MavMessage as M;
+        Some(match msg {
+            M::ATTITUDE(m) => Stamp::Wrapping(m.time_boot_ms),
+            M::SERVO_OUTPUT_RAW(m) => Stamp::Wrapping(m.time_usec),
+            M::RAW_IMU(m) => Stamp::Wide(m.time_usec),
+            M::HIGHRES_IMU(m) => Stamp::Wide(m.time_usec),
+            M::ACTUATOR_OUTPUT_STATUS(m) => Stamp::Wide(m.time_usec),
+            _ => return None,
+        })
+    }
+
+    /// Not after `newest` (a u32 stamp within half its wrap).
+    fn not_after(self, newest: Stamp) -> bool {
+        match (self, newest) {
+            (Stamp::Wrapping(s), Stamp::Wrapping(n)) => n.wrapping_sub(s) < 1 << 31,
+            (Stamp::Wide(s), Stamp::Wide(n)) => s <= n,
+            _ => false,
+        }
+    }
+}
+
+/// Per component: when each link last delivered a frame of it; the newest sequence number
+/// passed on and its link; per stamped message id the newest stamp passed on and its link; the
+/// frames and copies of the block under way, received while two links were delivering.
 #[derive(Debug, Default)]
 struct Component {
     last_on: BTreeMap<usize, f64>,
+    newest: Option<(u8, usize)>,
+    stamps: Vec<(u32, Stamp, usize)>,
     frames: u32,
     copies: u32,
 }
 
 #[derive(Debug, Default)]
 pub struct Merger {
+    /// The links' names, for what is said.
+    names: Vec<String>,
     /// Frame key → (arrival time, link).
     recent: HashMap<u64, (f64, usize)>,
     /// The keys in arrival order, for expiry.
@@ -70,11 +118,21 @@ pub struct Merger {
     payload: Vec<u8>,
     /// Frames dropped as copies of another link's, per link.
     pub copies: BTreeMap<usize, u64>,
+    /// Frames dropped as late.
+    pub late: u64,
     /// Keys evicted before their window ended (more than [`MAX_RECENT`] frames in it).
     pub evicted: u64,
 }
 
 impl Merger {
+    /// A merger of links with these names (in the order of their indices).
+    pub fn new(names: Vec<String>) -> Self {
+        Self {
+            names,
+            ..Self::default()
+        }
+    }
+
     /// Frame `f` arrived on link `link` at `now` (s, any monotonic clock).
     pub fn accept(&mut self, f: &Frame, link: usize, now: f64) -> Verdict {
         while let Some(&(t, key)) = self.order.front() {
@@ -90,11 +148,8 @@ impl Merger {
         let copy = matches!(self.recent.get(&key), Some(&(_, from)) if from != link);
         let c = self.components.entry((f.sysid, f.compid)).or_default();
         c.last_on.insert(link, now);
-        let both = c
-            .last_on
-            .iter()
-            .any(|(&l, &t)| l != link && now - t <= TWO_SOURCES_WITHIN_S);
-        if both {
+        let at_once = |l: usize, t: f64| l != link && now - t <= TWO_SOURCES_WITHIN_S;
+        if c.last_on.iter().any(|(&l, &t)| at_once(l, t)) {
             c.frames += 1;
             c.copies += u32::from(copy);
         }
@@ -102,11 +157,23 @@ impl Merger {
             let share = f64::from(c.copies) / f64::from(c.frames);
             (c.frames, c.copies) = (0, 0);
             if share < MIN_COPY_SHARE && self.told.insert(f.sysid) {
-                let links: Vec<String> = c.last_on.keys().map(|l| format!("#{}", l + 1)).collect();
+                let name = |l: usize| {
+                    self.names
+                        .get(l)
+                        .cloned()
+                        .unwrap_or_else(|| format!("link {}", l + 1))
+                };
+                let mut links = vec![name(link)];
+                links.extend(
+                    c.last_on
+                        .iter()
+                        .filter(|&(&l, &t)| at_once(l, t))
+                        .map(|(&l, _)| name(l)),
+                );
                 self.two_sources.push((
                     f.sysid,
                     format!(
-                        "system {} (component {}) arrives on links {} at once with {:.1} % of its frames in common (redundant links share most): two vehicles with one system id",
+                        "system {} (component {}) arrives on {} at once with {:.1} % of its frames in common (two paths of one stream share most): two vehicles with one system id, or two ports of one autopilot (each numbers its own frames); give the monitor one path per vehicle port",
                         f.sysid,
                         f.compid,
                         links.join(" and "),
@@ -118,6 +185,23 @@ impl Merger {
         if copy {
             *self.copies.entry(link).or_default() += 1;
             return Verdict::Copy;
+        }
+        let behind_by_seq = c.newest.is_some_and(|(newest, from)| {
+            from != link && (1..128).contains(&newest.wrapping_sub(f.seq))
+        });
+        let stamp = Stamp::of(&f.msg);
+        let slot = c.stamps.iter().position(|&(id, ..)| id == f.msg_id);
+        let behind_by_stamp = matches!((stamp, slot), (Some(s), Some(k))
+            if c.stamps[k].2 != link && s.not_after(c.stamps[k].1));
+        if behind_by_seq || behind_by_stamp {
+            self.late += 1;
+            return Verdict::Late;
+        }
+        c.newest = Some((f.seq, link));
+        match (stamp, slot) {
+            (Some(s), Some(k)) => c.stamps[k] = (f.msg_id, s, link),
+            (Some(s), None) => c.stamps.push((f.msg_id, s, link)),
+            _ => {}
         }
         // The same key again on the same link keeps its newest arrival; the older entry in
         // `order` then expires without removing it.
@@ -162,9 +246,14 @@ mod tests {
     use crate::protocol::MavMessage;
     use crate::protocol::dialects::ahcmon::ATTITUDE_DATA;
 
+    /// An ATTITUDE stamped `roll` ms (the tests' rolls count up).
     fn frame(sysid: u8, seq: u8, roll: f32) -> Frame {
+        stamped(sysid, seq, roll, roll as u32)
+    }
+
+    fn stamped(sysid: u8, seq: u8, roll: f32, time_boot_ms: u32) -> Frame {
         let msg = MavMessage::ATTITUDE(ATTITUDE_DATA {
-            time_boot_ms: u32::from(seq),
+            time_boot_ms,
             roll,
             ..Default::default()
         });
@@ -179,11 +268,16 @@ mod tests {
     }
 
     /// Brute force: a frame is a copy exactly when the newest delivered (not dropped) equal
-    /// frame, all five fields equal, came in on another link within the window.
+    /// frame, all five fields equal, came in on another link within the window; otherwise
+    /// late exactly when its component's newest delivered frame came from another link with a
+    /// sequence number ahead of it (by 1-127) or a stamp not before its own (u32 stamps
+    /// compared across their wrap).
     #[test]
     fn copies_are_exactly_the_equal_frames_of_other_links_within_the_window() {
         let mut m = Merger::default();
-        let mut seen: Vec<(f64, usize, u8, u8, f32)> = Vec::new();
+        let mut seen: Vec<(f64, usize, u8, u8, f32, u32)> = Vec::new();
+        // Stamps near each other, across the u32 wrap and half a wrap apart.
+        let stamps = [0, 1, 2, 3, u32::MAX - 1, u32::MAX, 1 << 31, (1 << 31) + 1];
         let mut x = 0x9e37_79b9_7f4a_7c15u64;
         let mut next = || {
             x ^= x << 13;
@@ -200,23 +294,35 @@ mod tests {
                 (next() % 8) as u8,
             );
             let roll = (next() % 3) as f32;
+            let stamp = stamps[(next() % 8) as usize];
             // The newest delivery of an equal frame decides.
-            let want_copy = seen
+            let copy = seen
                 .iter()
                 .rev()
-                .find(|&&(_, _, s, q, r)| s == sysid && q == seq && r == roll)
+                .find(|&&(_, _, s, q, r, st)| s == sysid && q == seq && r == roll && st == stamp)
                 .is_some_and(|&(at, l, ..)| t - at <= COPY_WINDOW_S && l != link);
-            let got = m.accept(&frame(sysid, seq, roll), link, t);
-            assert_eq!(
-                got == Verdict::Copy,
-                want_copy,
-                "t {t} link {link} seq {seq}"
-            );
+            let late = seen
+                .iter()
+                .rev()
+                .find(|&&(_, _, s, ..)| s == sysid)
+                .is_some_and(|&(_, l, _, q, _, st)| {
+                    l != link
+                        && ((1..128).contains(&q.wrapping_sub(seq))
+                            || st.wrapping_sub(stamp) < 1 << 31)
+                });
+            let want = match (copy, late) {
+                (true, _) => Verdict::Copy,
+                (false, true) => Verdict::Late,
+                _ => Verdict::New,
+            };
+            let got = m.accept(&stamped(sysid, seq, roll, stamp), link, t);
+            assert_eq!(got, want, "t {t} link {link} seq {seq} stamp {stamp}");
             if got == Verdict::New {
-                seen.push((t, link, sysid, seq, roll));
+                seen.push((t, link, sysid, seq, roll, stamp));
             }
         }
-        assert!(m.copies_total() > 100, "{} copies", m.copies_total());
+        assert!(m.copies_total() > 20, "{} copies", m.copies_total());
+        assert!(m.late > 100, "{} late", m.late);
     }
 
     #[test]
@@ -250,13 +356,42 @@ mod tests {
         let mut m = Merger::default();
         for k in 0..1_000u32 {
             let t = f64::from(k) * 0.01;
-            assert_eq!(m.accept(&frame(7, k as u8, 1.0), 0, t), Verdict::New);
-            assert_eq!(m.accept(&frame(7, k as u8, 2.0), 1, t), Verdict::New);
+            // Two boots' clocks: one vehicle's frames are behind the other's, and dropped.
+            assert_ne!(m.accept(&frame(7, k as u8, 1.0), 0, t), Verdict::Copy);
+            assert_ne!(m.accept(&frame(7, k as u8, 2.0), 1, t), Verdict::Copy);
         }
         let told = m.take_two_sources();
         assert_eq!(told.len(), 1, "{told:?}");
-        assert!(told[0].1.contains("links #1 and #2"), "{}", told[0].1);
+        assert!(
+            told[0].1.contains("on link 1 and link 2 at once"),
+            "{}",
+            told[0].1
+        );
         assert!(m.take_two_sources().is_empty());
+    }
+
+    /// The second path three frames behind: a gap of the first is filled only by a frame
+    /// that comes before the sender's next one, which at three frames behind is never.
+    #[test]
+    fn a_slower_path_s_fills_after_a_newer_frame_are_late() {
+        let mut m = Merger::default();
+        let (mut new, mut late) = (0, 0);
+        let on0 = |k: u32| !k.is_multiple_of(5);
+        for k in 0..3_000u32 {
+            let t = f64::from(k) * 0.002;
+            if on0(k) {
+                assert_eq!(m.accept(&frame(1, k as u8, k as f32), 0, t), Verdict::New);
+                new += 1;
+            }
+            if k >= 3 {
+                let j = k - 3;
+                let got = m.accept(&frame(1, j as u8, j as f32), 1, t);
+                let want = if on0(j) { Verdict::Copy } else { Verdict::Late };
+                assert_eq!(got, want, "frame {j}");
+                late += u64::from(!on0(j));
+            }
+        }
+        assert_eq!((new, m.late), (2_400, late));
     }
 
     #[test]
