@@ -19,7 +19,7 @@ cargo build --release --quiet
 bin=$PWD/target/release/ahcmon
 tmp=$(mktemp -d)
 monitor=
-trap '[ -n "$monitor" ] && kill "$monitor" 2>/dev/null; rm -rf "$tmp"' EXIT
+trap '{ [ -n "$monitor" ] && kill "$monitor" 2>/dev/null; } || true; rm -rf "$tmp"' EXIT
 i=0
 for s in quad-x-motor2-loe-live quad-x-motor2-loe-live heli-swash2-loe-live heli-swash2-loe-live; do
   i=$((i + 1))

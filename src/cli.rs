@@ -64,6 +64,13 @@ pub enum Command {
     /// diagnosis: decisions as they happen, a summary at the end (final estimates with bounds,
     /// decisions, and counts of everything dropped).
     Replay(ReplayArgs),
+    /// Replay many logs (files, directories searched for .tlog, .bin and .ulg, glob patterns)
+    /// on all cores, one log per task, and write one JSON line per flight × vehicle ×
+    /// actuator: its gamma and delta (both filters' medians over the flight, with bounds), its
+    /// faults and the data's quality. A log that cannot be read is named with its reason and
+    /// the others go on. Exit 0: every log read; 1: some could not be (their rows are missing,
+    /// the others' written); 2: no log at all, or the command line.
+    Scan(ScanArgs),
     /// Replay labelled logs and score the fault decisions against their truth: per log the
     /// first fault decision at or after the onset (actuator, delay, class), the fault decisions
     /// before it, and per dataset the totals (healthy flights' fault decisions per flight hour,
@@ -137,6 +144,7 @@ impl Command {
             }
             Command::Calibrate(a) => vec![("--output", Some(a.output.as_path()))],
             Command::Benchmark(a) => vec![("--json", a.json.as_deref())],
+            Command::Scan(a) => vec![("--rows", Some(a.rows.as_path()))],
             Command::Thresholds(_) | Command::Completions(_) | Command::Man(_) => vec![],
         };
         flags
@@ -145,6 +153,20 @@ impl Command {
             .map(|(flag, _)| flag)
             .collect()
     }
+}
+
+#[derive(clap::Args)]
+pub struct ScanArgs {
+    /// Logs: files (any name: the format is told by content), directories (searched
+    /// recursively for .tlog, .bin and .ulg), or glob patterns in quotes ('logs/**/*.tlog').
+    #[arg(required = true, value_name = "PATH")]
+    pub paths: Vec<PathBuf>,
+    /// Write the rows here (`-`: standard output, the default).
+    #[arg(long, value_name = "FILE.jsonl", default_value = "-")]
+    pub rows: PathBuf,
+    /// Logs replayed at once (default: one per core).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=1024))]
+    pub jobs: Option<u16>,
 }
 
 #[derive(clap::Args)]

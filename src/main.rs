@@ -50,6 +50,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Demo(a) => app::monitor::demo(a),
         Command::Calibrate(a) => app::calibrate::run(a),
         Command::Replay(a) => app::replay::run(a),
+        Command::Scan(a) => app::scan::run(a),
         Command::Benchmark(a) => app::benchmark::run(a),
         Command::Completions(a) => app::shell::completions(a),
         Command::Man(a) => app::shell::man(a),

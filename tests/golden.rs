@@ -104,6 +104,7 @@ fn cases(with_shared: bool) -> Vec<Case> {
         "demo",
         "calibrate",
         "replay",
+        "scan",
     ];
     for flag in ["--help", "-h", "--version"] {
         cases.push(Case {

@@ -47,6 +47,7 @@ mod matrix;
 pub mod monitor;
 mod rates;
 pub mod replay;
+pub mod scan;
 pub mod shell;
 pub mod sim;
 pub mod thresholds;

@@ -4,6 +4,7 @@
 pub mod alerts;
 pub mod dashboard;
 pub mod file;
+pub mod flights;
 pub mod jsonl;
 pub mod matrix;
 pub mod plot;
