@@ -71,6 +71,11 @@ pub enum Command {
     /// the others go on. Exit 0: every log read; 1: some could not be (their rows are missing,
     /// the others' written); 2: no log at all, or the command line.
     Scan(ScanArgs),
+    /// Health over flights, from `scan`'s rows: per airframe (or system id) × actuator, the
+    /// MIT-UKF's median gamma flight by flight, its weighted trend over the last flights, and
+    /// an alarm when it falls beyond --t-alarm standard errors and is predicted to reach
+    /// --loss-gamma within --horizon flights (docs/fleet.md). Exit 0 with or without alarms.
+    History(HistoryArgs),
     /// Replay labelled logs and score the fault decisions against their truth: per log the
     /// first fault decision at or after the onset (actuator, delay, class), the fault decisions
     /// before it, and per dataset the totals (healthy flights' fault decisions per flight hour,
@@ -145,6 +150,7 @@ impl Command {
             Command::Calibrate(a) => vec![("--output", Some(a.output.as_path()))],
             Command::Benchmark(a) => vec![("--json", a.json.as_deref())],
             Command::Scan(a) => vec![("--rows", Some(a.rows.as_path()))],
+            Command::History(a) => vec![("--json", a.json.as_deref())],
             Command::Thresholds(_) | Command::Completions(_) | Command::Man(_) => vec![],
         };
         flags
@@ -167,6 +173,36 @@ pub struct ScanArgs {
     /// Logs replayed at once (default: one per core).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=1024))]
     pub jobs: Option<u16>,
+    /// Vehicle profile for every log: built-in name or TOML file. One that `ahcmon calibrate`
+    /// wrote (identified on a healthy flight of the airframe) is used from the take-off on,
+    /// so a weakness present from the start is measured against the airframe's healthy model
+    /// rather than learnt as its normal by the in-flight calibration. Default: chosen per log
+    /// from its HEARTBEAT and parameters, calibrated in flight.
+    #[arg(long, value_name = "NAME|FILE")]
+    pub profile: Option<String>,
+}
+
+#[derive(clap::Args)]
+pub struct HistoryArgs {
+    /// `ahcmon scan`'s rows (JSON lines).
+    #[arg(value_name = "ROWS.jsonl")]
+    pub rows: PathBuf,
+    /// The gain counted as lost.
+    #[arg(long, default_value_t = 0.8, value_name = "GAMMA")]
+    pub loss_gamma: f64,
+    /// Alarm when the loss is predicted within this many flights.
+    #[arg(long, default_value_t = 10.0, value_name = "FLIGHTS")]
+    pub horizon: f64,
+    /// Flights fitted, the last ones up to the flight judged (at least 4).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(4..=1000))]
+    pub window: u16,
+    /// Standard errors the falling slope must pass.
+    #[arg(long, default_value_t = 4.0, value_name = "T")]
+    pub t_alarm: f64,
+    /// Also write every series with its points, trend and alarm as one JSON document (`-`:
+    /// standard output, the table then on standard error).
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]

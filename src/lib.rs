@@ -8,6 +8,7 @@ pub mod estimate;
 pub mod eval;
 #[doc(hidden)]
 pub mod fuzzing;
+pub mod history;
 pub mod link;
 pub mod model;
 pub mod monitor;

@@ -51,6 +51,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Calibrate(a) => app::calibrate::run(a),
         Command::Replay(a) => app::replay::run(a),
         Command::Scan(a) => app::scan::run(a),
+        Command::History(a) => app::history::run(a),
         Command::Benchmark(a) => app::benchmark::run(a),
         Command::Completions(a) => app::shell::completions(a),
         Command::Man(a) => app::shell::man(a),

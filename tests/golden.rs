@@ -105,6 +105,7 @@ fn cases(with_shared: bool) -> Vec<Case> {
         "calibrate",
         "replay",
         "scan",
+        "history",
     ];
     for flag in ["--help", "-h", "--version"] {
         cases.push(Case {

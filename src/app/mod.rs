@@ -40,6 +40,7 @@ pub mod benchmark;
 pub mod calibrate;
 pub mod eval;
 mod fly;
+pub mod history;
 mod latency;
 mod live;
 pub mod log;

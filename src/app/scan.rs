@@ -23,7 +23,15 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
         paths,
         rows: out,
         jobs,
+        profile,
     } = a;
+    let config = ahcmon::pipeline::PipelineConfig {
+        profile: profile
+            .as_deref()
+            .map(ahcmon::telemetry::Profile::resolve)
+            .transpose()?,
+        ..ahcmon::pipeline::PipelineConfig::default()
+    };
     let inputs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
     check_outputs(&inputs, &[("--rows", Some(&out))])?;
     let (logs, missing) = expand(&paths)?;
@@ -55,7 +63,7 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
     let results: Vec<Result<Vec<Value>, String>> = pool.install(|| {
         logs.par_iter()
             .map(|path| {
-                let r = scan_log(path);
+                let r = scan_log(path, &config);
                 progress.step(&path.display().to_string());
                 r
             })
@@ -166,8 +174,8 @@ fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
 }
 
 /// One log through its own monitor: its rows, or why it could not be read.
-fn scan_log(path: &Path) -> Result<Vec<Value>, String> {
-    let mut monitor = Monitor::new(ahcmon::pipeline::PipelineConfig::default());
+fn scan_log(path: &Path, config: &ahcmon::pipeline::PipelineConfig) -> Result<Vec<Value>, String> {
+    let mut monitor = Monitor::new(config.clone());
     let mut sink = FlightSink::default();
     let format = std::fs::File::open(path)
         .and_then(sniff)

@@ -1,0 +1,160 @@
+//! Health over flights: each airframe × actuator's gain across its flights (`ahcmon scan`'s
+//! rows), a trend, and an alarm when the gain is heading out of its band.
+//!
+//! **Fit.** The points are the flights' median gamma of the MIT-UKF (`y_k`, flight index `k`
+//! in start-time order), weighted by their median bounds: `w_k = 1/σ_k²` with `σ_k` a third of
+//! the bounds' half-width (they are 3σ). Over the last [`HistoryRule::window`] flights a
+//! weighted least-squares line `y = a + b k` is fitted. The bounds say how the flights compare,
+//! not how far the medians scatter from flight to flight (a median of thousands of steps is
+//! much tighter than one step's bounds), so the slope's standard error is scaled by the
+//! weighted residuals: `se(b)² = s² / Σ w (k - k̄)²`, `s² = Σ w r² / (n - 2)`.
+//!
+//! **Alarm** at a flight, from the flights up to it: the slope is negative beyond
+//! [`HistoryRule::t_alarm`] standard errors (`b / se(b) < -t_alarm`), and the line crosses
+//! [`HistoryRule::loss_gamma`] within [`HistoryRule::horizon`] flights after it. With 8 points
+//! (6 degrees of freedom) a healthy series' slope passes -4 standard errors by chance with a
+//! probability of 0.004 (Student's t) per flight judged.
+
+/// The rule's numbers.
+#[derive(Debug, Clone, Copy)]
+pub struct HistoryRule {
+    /// The gain counted as lost (the crossing predicted).
+    pub loss_gamma: f64,
+    /// Flights ahead within which a predicted crossing raises the alarm.
+    pub horizon: f64,
+    /// Flights fitted (the last ones up to the flight judged); at least 4.
+    pub window: usize,
+    /// Standard errors below zero the slope must be.
+    pub t_alarm: f64,
+}
+
+impl Default for HistoryRule {
+    fn default() -> Self {
+        Self {
+            loss_gamma: 0.8,
+            horizon: 10.0,
+            window: 8,
+            t_alarm: 4.0,
+        }
+    }
+}
+
+/// One flight's point: its median gamma and the median bounds.
+#[derive(Debug, Clone, Copy)]
+pub struct Point {
+    pub gamma: f64,
+    pub lo: f64,
+    pub hi: f64,
+}
+
+/// A line through the points: `gamma = intercept + slope k` (k: the flight's index in the
+/// series), the slope's standard error, and the flight index where it reaches the loss gain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Trend {
+    pub intercept: f64,
+    pub slope: f64,
+    pub slope_se: f64,
+    pub crossing: Option<f64>,
+}
+
+/// The weighted line through `points[first..=last]`, or `None` with under 4 usable points.
+pub fn fit(points: &[Point], first: usize, last: usize, loss_gamma: f64) -> Option<Trend> {
+    let usable: Vec<(f64, f64, f64)> = (first..=last.min(points.len().saturating_sub(1)))
+        .filter_map(|k| {
+            let p = points[k];
+            let sigma = (p.hi - p.lo) / 6.0;
+            (p.gamma.is_finite() && sigma.is_finite() && sigma > 0.0)
+                .then(|| (k as f64, p.gamma, 1.0 / (sigma * sigma)))
+        })
+        .collect();
+    if usable.len() < 4 {
+        return None;
+    }
+    let sw: f64 = usable.iter().map(|u| u.2).sum();
+    let kbar = usable.iter().map(|u| u.2 * u.0).sum::<f64>() / sw;
+    let ybar = usable.iter().map(|u| u.2 * u.1).sum::<f64>() / sw;
+    let sxx: f64 = usable.iter().map(|u| u.2 * (u.0 - kbar).powi(2)).sum();
+    let sxy: f64 = usable
+        .iter()
+        .map(|u| u.2 * (u.0 - kbar) * (u.1 - ybar))
+        .sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let slope = sxy / sxx;
+    let intercept = ybar - slope * kbar;
+    let resid: f64 = usable
+        .iter()
+        .map(|u| u.2 * (u.1 - intercept - slope * u.0).powi(2))
+        .sum();
+    let s2 = resid / (usable.len() - 2) as f64;
+    let slope_se = (s2 / sxx).sqrt();
+    let crossing = (slope < 0.0).then(|| (loss_gamma - intercept) / slope);
+    Some(Trend {
+        intercept,
+        slope,
+        slope_se,
+        crossing,
+    })
+}
+
+/// The first flight (index) at which the rule alarms, judging each flight from the ones up to
+/// it, with that flight's trend.
+pub fn first_alarm(points: &[Point], rule: &HistoryRule) -> Option<(usize, Trend)> {
+    (0..points.len()).find_map(|k| {
+        let first = (k + 1).saturating_sub(rule.window.max(4));
+        let t = fit(points, first, k, rule.loss_gamma)?;
+        let falling = t.slope < 0.0 && t.slope < -rule.t_alarm * t.slope_se;
+        let soon = t.crossing.is_some_and(|c| c - k as f64 <= rule.horizon);
+        (falling && soon).then_some((k, t))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(ys: &[f64]) -> Vec<Point> {
+        ys.iter()
+            .map(|&y| Point {
+                gamma: y,
+                lo: y - 0.03,
+                hi: y + 0.03,
+            })
+            .collect()
+    }
+
+    /// Equal weights: the slope and its standard error are ordinary least squares', checked
+    /// against the textbook formulas on a small series.
+    #[test]
+    fn equal_weights_give_ordinary_least_squares() {
+        let ys = [1.0, 0.99, 0.97, 0.96, 0.95];
+        let t = fit(&points(&ys), 0, 4, 0.8).unwrap();
+        // x = 0..4: x̄ = 2, ȳ = 0.974, Sxx = 10, Sxy = Σ (x - 2) y = -0.13.
+        assert!((t.slope - (-0.013)).abs() < 1e-12, "{t:?}");
+        assert!((t.intercept - 1.0).abs() < 1e-12, "{t:?}");
+        let resid: f64 = ys
+            .iter()
+            .enumerate()
+            .map(|(x, y)| (y - t.intercept - t.slope * x as f64).powi(2))
+            .sum();
+        assert!((t.slope_se - (resid / 3.0 / 10.0).sqrt()).abs() < 1e-12);
+        assert!((t.crossing.unwrap() - (0.8 - t.intercept) / t.slope).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_steady_fall_alarms_early_and_a_flat_series_never() {
+        let rule = HistoryRule::default();
+        // 0.02 a flight with ±0.004 of scatter: crosses 0.8 at flight 10.
+        let scatter = [
+            0.003, -0.004, 0.001, 0.004, -0.002, 0.0, -0.003, 0.002, 0.004, -0.001, 0.002, -0.004,
+        ];
+        let falling: Vec<f64> = (0..12)
+            .map(|k| 1.0 - 0.02 * k as f64 + scatter[k])
+            .collect();
+        let (k, _) = first_alarm(&points(&falling), &rule).unwrap();
+        assert!(k <= 5, "alarm at flight {k}");
+        let flat: Vec<f64> = scatter.iter().map(|s| 1.0 + s).collect();
+        assert_eq!(first_alarm(&points(&flat), &rule), None);
+    }
+}
