@@ -68,8 +68,9 @@ pub enum Command {
     /// on all cores, one log per task, and write one JSON line per flight × vehicle ×
     /// actuator: its gamma and delta (both filters' medians over the flight, with bounds), its
     /// faults and the data's quality. A log that cannot be read is named with its reason and
-    /// the others go on. Exit 0: every log read; 1: some could not be (their rows are missing,
-    /// the others' written); 2: no log at all, or the command line.
+    /// the others go on. Exit 0: every log read; 1: some logs or directories could not be
+    /// read, or some paths named nothing (their rows are missing, the others' written); 2: no
+    /// log at all, or the command line.
     Scan(ScanArgs),
     /// Health over flights, from `scan`'s rows: per airframe (or system id) × actuator, the
     /// MIT-UKF's median gamma flight by flight, its weighted trend over the last flights, and

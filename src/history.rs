@@ -9,11 +9,14 @@
 //! much tighter than one step's bounds), so the slope's standard error is scaled by the
 //! weighted residuals: `se(b)² = s² / Σ w (k - k̄)²`, `s² = Σ w r² / (n - 2)`.
 //!
-//! **Alarm** at a flight, from the flights up to it: the slope is negative beyond
-//! [`HistoryRule::t_alarm`] standard errors (`b / se(b) < -t_alarm`), and the line crosses
-//! [`HistoryRule::loss_gamma`] within [`HistoryRule::horizon`] flights after it. With 8 points
-//! (6 degrees of freedom) a healthy series' slope passes -4 standard errors by chance with a
-//! probability of 0.004 (Student's t) per flight judged.
+//! **Alarm** at a flight, from the last [`HistoryRule::window`] flights up to it (a flight is
+//! judged once that many are there): the slope is negative beyond [`HistoryRule::t_alarm`]
+//! standard errors (`b / se(b) < -t_alarm`), and the line crosses
+//! [`HistoryRule::loss_gamma`] within [`HistoryRule::horizon`] flights after it. With 8 usable
+//! points (6 degrees of freedom), were the flights' scatter about the line normal and their
+//! weights right, a healthy series' slope would pass -4 standard errors by chance with a
+//! probability of 0.0036 (Student's t) per flight judged; fewer usable points (bounds missing)
+//! make it likelier (0.008 at 5).
 
 /// The rule's numbers.
 #[derive(Debug, Clone, Copy)]
@@ -101,8 +104,9 @@ pub fn fit(points: &[Point], first: usize, last: usize, loss_gamma: f64) -> Opti
 /// The first flight (index) at which the rule alarms, judging each flight from the ones up to
 /// it, with that flight's trend.
 pub fn first_alarm(points: &[Point], rule: &HistoryRule) -> Option<(usize, Trend)> {
-    (0..points.len()).find_map(|k| {
-        let first = (k + 1).saturating_sub(rule.window.max(4));
+    let window = rule.window.max(4);
+    (window - 1..points.len()).find_map(|k| {
+        let first = k + 1 - window;
         let t = fit(points, first, k, rule.loss_gamma)?;
         let falling = t.slope < 0.0 && t.slope < -rule.t_alarm * t.slope_se;
         let soon = t.crossing.is_some_and(|c| c - k as f64 <= rule.horizon);
@@ -152,8 +156,10 @@ mod tests {
         let falling: Vec<f64> = (0..12)
             .map(|k| 1.0 - 0.02 * k as f64 + scatter[k])
             .collect();
-        let (k, _) = first_alarm(&points(&falling), &rule).unwrap();
-        assert!(k <= 5, "alarm at flight {k}");
+        // Judged from the window's last flight on, and alarmed there, before the loss.
+        let (k, t) = first_alarm(&points(&falling), &rule).unwrap();
+        assert_eq!(k, rule.window - 1);
+        assert!(t.crossing.unwrap() > k as f64, "{t:?}");
         let flat: Vec<f64> = scatter.iter().map(|s| 1.0 + s).collect();
         assert_eq!(first_alarm(&points(&flat), &rule), None);
     }

@@ -64,7 +64,10 @@ fn a_directory_of_logs_with_a_bad_one_gives_every_good_log_s_rows() {
         err.contains("none.tlog: no such file or directory"),
         "{err}"
     );
-    assert!(err.contains("2 of 8 logs could not be read"), "{err}");
+    assert!(
+        err.contains("1 logs or directories could not be read and 1 paths named nothing"),
+        "{err}"
+    );
     let rows = rows(text);
     // Each of the four SITL logs: one row per actuator of its vehicle (4 motors, 4 servos).
     for sitl in [
@@ -166,14 +169,33 @@ print(json.dumps({k: statistics.median_low(v) for k, v in series.items()}))
     }
 }
 
-/// Nothing to scan is the command line's mistake (exit 2), and an output that would replace
-/// an input is refused.
+/// Nothing to scan is the command line's mistake (exit 2): an empty directory, paths that
+/// name nothing; an output that would replace an input is refused (exit 2); a scan that
+/// writes no row leaves no earlier rows behind.
 #[test]
 fn nothing_to_scan_is_exit_2() {
     let dir = common::temp_dir("scan_empty");
     let (code, _, err) = ahcmon(&["scan", dir.to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("no log in"), "{err}");
+    let typo = dir.join("typo");
+    let (code, _, err) = ahcmon(&["scan", typo.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("typo: no such file or directory"), "{err}");
+    // A log without a vehicle's samples: no row, and yesterday's rows gone.
+    let quiet = dir.join("quiet.tlog");
+    let log = std::fs::read(common::data("mavlink/rust-mavlink-log.tlog")).unwrap();
+    std::fs::write(&quiet, &log[..log.len().min(200)]).unwrap();
+    let rows = dir.join("rows.jsonl");
+    std::fs::write(&rows, "yesterday\n").unwrap();
+    let (code, _, err) = ahcmon(&[
+        "scan",
+        quiet.to_str().unwrap(),
+        "--rows",
+        rows.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read_to_string(&rows).unwrap(), "", "{err}");
     let log = common::data("sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog");
     let (code, _, err) = ahcmon(&[
         "scan",
@@ -199,7 +221,7 @@ fn the_external_archive_with_a_bad_file_is_scanned_whole() {
     let bad = dir.join("cut.bin");
     std::fs::write(&bad, [0xA3, 0x95, 0x80, 0x80]).unwrap();
     let out = dir.join("rows.jsonl");
-    let (code, _, err) = ahcmon(&[
+    let (code, said, err) = ahcmon(&[
         "scan",
         root.to_str().unwrap(),
         bad.to_str().unwrap(),
@@ -228,8 +250,12 @@ fn the_external_archive_with_a_bad_file_is_scanned_whole() {
     }
     assert!(logs.len() >= 40, "{} logs", logs.len());
     assert!(
-        err.contains(&format!("1 of {} logs could not be read", logs.len() + 1)),
+        err.contains("1 logs or directories could not be read and 0 paths named nothing"),
         "{err}"
+    );
+    assert!(
+        said.contains(&format!("scanned {} logs", logs.len() + 1)),
+        "{said}"
     );
     for log in &logs {
         let of: Vec<&Value> = rows

@@ -9,6 +9,13 @@ use anyhow::Context;
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
+/// Flights by start time, those without one after them, then by file name.
+fn order(flights: &mut [Flight]) {
+    flights.sort_by(|a, b| {
+        (a.start.is_none(), a.start, &a.file).cmp(&(b.start.is_none(), b.start, &b.file))
+    });
+}
+
 /// One flight of a series, in the order it is sorted by.
 struct Flight {
     start: Option<u64>,
@@ -94,7 +101,12 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
     let mut doc = Vec::new();
     let mut alarms = 0;
     for ((airframe, actuator), mut flights) in series {
-        flights.sort_by(|a, b| (a.start, &a.file).cmp(&(b.start, &b.file)));
+        order(&mut flights);
+        if flights.iter().any(|f| f.start.is_none()) && flights.iter().any(|f| f.start.is_some()) {
+            tracing::warn!(
+                "history: {airframe} {actuator}: some flights have no start time (a DataFlash or ULog log): they are put after those that have, by file name"
+            );
+        }
         let points: Vec<Point> = flights.iter().map(|f| f.point).collect();
         let last = points.len() - 1;
         let trend = fit(
@@ -117,8 +129,8 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
                 .and_then(|t| t.crossing)
                 .filter(|c| c.is_finite())
                 .map_or("-".into(), |c| format!(
-                    "flight {}",
-                    c.ceil().max(0.0) as i64 + 1
+                    "flight {:.0}",
+                    (c + 1.0).ceil().max(1.0)
                 )),
             alarm.map_or(String::new(), |(k, _)| format!(
                 "ALARM from flight {} ({})",
@@ -147,4 +159,31 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flights_go_by_start_time_then_those_without_by_name() {
+        let f = |start: Option<u64>, file: &str| Flight {
+            start,
+            file: file.into(),
+            point: Point {
+                gamma: 1.0,
+                lo: 0.9,
+                hi: 1.1,
+            },
+        };
+        let mut flights = vec![
+            f(None, "a.bin"),
+            f(Some(30), "b.tlog"),
+            f(Some(10), "z.tlog"),
+            f(None, "0.ulg"),
+        ];
+        order(&mut flights);
+        let names: Vec<&str> = flights.iter().map(|f| f.file.as_str()).collect();
+        assert_eq!(names, ["z.tlog", "b.tlog", "0.ulg", "a.bin"]);
+    }
 }

@@ -32,21 +32,32 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
             .transpose()?,
         ..ahcmon::pipeline::PipelineConfig::default()
     };
-    let inputs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
-    check_outputs(&inputs, &[("--rows", Some(&out))])?;
-    let (logs, missing) = expand(&paths)?;
-    if logs.is_empty() && missing.is_empty() {
-        return Err(UsageError(format!(
+    let Expanded {
+        logs,
+        unreadable,
+        nothing,
+    } = expand(&paths);
+    if logs.is_empty() {
+        let mut why = vec![format!(
             "no log in {} (directories are searched for .{})",
-            paths
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
+            shown(&paths),
             LOG_EXTENSIONS.join(", .")
-        ))
-        .into());
+        )];
+        why.extend(
+            nothing
+                .iter()
+                .map(|p| format!("{}: no such file or directory", p.display())),
+        );
+        why.extend(
+            unreadable
+                .iter()
+                .map(|(p, e)| format!("{}: {e}", p.display())),
+        );
+        return Err(UsageError(why.join("; ")).into());
     }
+    // Against every log found, not only the paths named (a glob may match the rows file).
+    let inputs: Vec<&Path> = logs.iter().map(PathBuf::as_path).collect();
+    check_outputs(&inputs, &[("--rows", Some(&out))])?;
     // Open (not empty) the output before the long work, so a path that cannot be written
     // fails at once.
     let mut file = std::io::BufWriter::new(
@@ -63,23 +74,20 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
     let results: Vec<Result<Vec<Value>, String>> = pool.install(|| {
         logs.par_iter()
             .map(|path| {
-                let r = scan_log(path, &config);
+                // A panic in one log's replay is that log's failure, not the scan's.
+                let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    scan_log(path, &config)
+                }))
+                .unwrap_or_else(|_| {
+                    Err("internal error while replaying it (a bug: please report the log)".into())
+                });
                 progress.step(&path.display().to_string());
                 r
             })
             .collect()
     });
     progress.clear();
-    let named = logs.len() + missing.len();
-    let mut failed: Vec<(String, String)> = missing
-        .into_iter()
-        .map(|p| {
-            (
-                p.display().to_string(),
-                "no such file or directory".to_string(),
-            )
-        })
-        .collect();
+    let mut failed: Vec<(String, String)> = Vec::new();
     let (mut written, mut flightless) = (0usize, 0usize);
     for (path, result) in logs.iter().zip(results) {
         match result {
@@ -94,83 +102,135 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
             Err(why) => failed.push((path.display().to_string(), why)),
         }
     }
+    failed.extend(
+        unreadable
+            .iter()
+            .map(|(p, e)| (p.display().to_string(), e.clone())),
+    );
+    // A scan that wrote no row leaves no earlier run's rows behind.
+    if written == 0 {
+        file.get_mut()
+            .empty()
+            .with_context(|| format!("cannot write {}", out.display()))?;
+    }
     file.flush()
         .with_context(|| format!("cannot write {}", out.display()))?;
     for (path, why) in &failed {
         tracing::warn!("scan: {path}: {why}");
     }
+    for p in &nothing {
+        tracing::warn!("scan: {}: no such file or directory", p.display());
+    }
     outln!(
-        "scanned {} logs in {:.1} s on {} threads: {written} rows; {flightless} logs without a vehicle's samples; {} could not be read",
+        "scanned {} logs in {:.1} s on {} threads: {written} rows; {flightless} logs without a vehicle's samples; {} could not be read; {} paths named nothing",
         logs.len(),
         started.elapsed().as_secs_f64(),
         pool.current_num_threads(),
-        failed.len()
+        failed.len(),
+        nothing.len()
     );
-    if !failed.is_empty() {
+    if !failed.is_empty() || !nothing.is_empty() {
         anyhow::bail!(
-            "{} of {} logs could not be read (named above); the others' rows are written",
+            "{} logs or directories could not be read and {} paths named nothing (said above); every other log's rows are written",
             failed.len(),
-            named
+            nothing.len()
         );
     }
     Ok(())
 }
 
-/// The logs the paths name, each once, in order (a directory's files sorted by path), and the
-/// paths that name nothing.
-fn expand(paths: &[PathBuf]) -> anyhow::Result<(Vec<PathBuf>, Vec<PathBuf>)> {
-    let (mut logs, mut missing) = (Vec::new(), Vec::new());
+fn shown(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// What the paths name: the logs, each once, in order (a directory's sorted by path); the
+/// directories or glob matches that could not be read, with why; the paths that name nothing.
+struct Expanded {
+    logs: Vec<PathBuf>,
+    unreadable: Vec<(PathBuf, String)>,
+    nothing: Vec<PathBuf>,
+}
+
+fn expand(paths: &[PathBuf]) -> Expanded {
+    let mut x = Expanded {
+        logs: Vec::new(),
+        unreadable: Vec::new(),
+        nothing: Vec::new(),
+    };
     for p in paths {
         if p.is_dir() {
-            walk(p, &mut logs)?;
+            walk(p, &mut x);
         } else if p.exists() {
-            logs.push(p.clone());
+            x.logs.push(p.clone());
         } else if let Some(pattern) = p.to_str().filter(|s| s.contains(['*', '?', '['])) {
-            let matched = glob::glob(pattern)
-                .map_err(|e| UsageError(format!("{pattern}: not a glob pattern ({e})")))?;
+            let matched = match glob::glob(pattern) {
+                Ok(m) => m,
+                Err(e) => {
+                    x.unreadable
+                        .push((p.clone(), format!("not a glob pattern ({e})")));
+                    continue;
+                }
+            };
             let mut any = false;
-            for m in matched.flatten() {
+            for m in matched {
                 any = true;
-                if m.is_dir() {
-                    walk(&m, &mut logs)?;
-                } else {
-                    logs.push(m);
+                match m {
+                    Ok(m) if m.is_dir() => walk(&m, &mut x),
+                    Ok(m) => x.logs.push(m),
+                    Err(e) => x
+                        .unreadable
+                        .push((e.path().to_path_buf(), e.error().to_string())),
                 }
             }
             if !any {
-                missing.push(p.clone());
+                x.nothing.push(p.clone());
             }
         } else {
-            missing.push(p.clone());
+            x.nothing.push(p.clone());
         }
     }
     let mut seen = std::collections::BTreeSet::new();
-    logs.retain(|p| seen.insert(std::fs::canonicalize(p).unwrap_or_else(|_| p.clone())));
-    Ok((logs, missing))
+    x.logs
+        .retain(|p| seen.insert(std::fs::canonicalize(p).unwrap_or_else(|_| p.clone())));
+    x
 }
 
 /// A directory's logs, recursively, sorted by path; symbolic links to directories are not
-/// followed (no cycles).
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
-    let mut entries: Vec<std::fs::DirEntry> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read directory {}", dir.display()))?
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("cannot read directory {}", dir.display()))?;
+/// followed (no cycles). A directory that cannot be read is noted and the rest go on.
+fn walk(dir: &Path, x: &mut Expanded) {
+    let entries = std::fs::read_dir(dir).and_then(|d| d.collect::<Result<Vec<_>, _>>());
+    let mut entries = match entries {
+        Ok(e) => e,
+        Err(e) => {
+            x.unreadable.push((dir.to_path_buf(), e.to_string()));
+            return;
+        }
+    };
     entries.sort_by_key(std::fs::DirEntry::path);
     for e in entries {
-        let kind = e.file_type()?;
         let path = e.path();
-        if kind.is_dir() {
-            walk(&path, out)?;
-        } else if path.extension().and_then(|x| x.to_str()).is_some_and(|x| {
-            LOG_EXTENSIONS
-                .iter()
-                .any(|known| x.eq_ignore_ascii_case(known))
-        }) {
-            out.push(path);
+        match e.file_type() {
+            Ok(kind) if kind.is_dir() => walk(&path, x),
+            Ok(_) => {
+                if path
+                    .extension()
+                    .and_then(|x| x.to_str())
+                    .is_some_and(|ext| {
+                        LOG_EXTENSIONS
+                            .iter()
+                            .any(|known| ext.eq_ignore_ascii_case(known))
+                    })
+                {
+                    x.logs.push(path);
+                }
+            }
+            Err(e) => x.unreadable.push((path, e.to_string())),
         }
     }
-    Ok(())
 }
 
 /// One log through its own monitor: its rows, or why it could not be read.

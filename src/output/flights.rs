@@ -5,9 +5,10 @@
 //! calibration**, with the medians of its lower and upper bounds: a fault in the last minute
 //! of an hour's flight moves the median little, which is what a trend across flights wants;
 //! the faults themselves are counted beside it. The set filter's medians are over the steps
-//! where that coefficient was excited (its bounds are the a priori box otherwise). Medians are read from histograms of [`BIN`] wide bins over the range
-//! the filters' boxes allow, so memory stays flat in the log's length and a median is exact
-//! to [`BIN`]. `gamma_steps` and `delta_steps` say over how many steps.
+//! where that coefficient was excited (its bounds are the a priori box otherwise). Medians
+//! are read from histograms of [`BIN`] wide bins over the range the filters' boxes allow, so
+//! memory stays flat in the log's length and a median is exact to [`BIN`]. `gamma_steps` and
+//! `delta_steps` say over how many steps.
 
 use super::Sink;
 use super::summary::actuator_state;
