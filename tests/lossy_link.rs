@@ -182,8 +182,8 @@ fn stream(
     }
 }
 
-#[test]
-fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
+/// The repository's root and the SITL logs' truth.
+fn sitl_truth() -> (PathBuf, DatasetTruth) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let path = root.join("tests/datasets/sitl.toml");
     let truth = DatasetTruth::from_toml(
@@ -191,6 +191,12 @@ fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
         &path.display().to_string(),
     )
     .unwrap();
+    (root, truth)
+}
+
+#[test]
+fn a_fifth_of_the_packets_lost_still_names_each_sitl_fault_within_5_s() {
+    let (root, truth) = sitl_truth();
     // All four at once, each to its own monitor: the suite's wall time is one log's.
     let runs: Vec<_> = truth
         .cases
@@ -261,13 +267,7 @@ fn count_before(text: &str, what: &str) -> usize {
 /// own fifth of the frames: the copies dropped and counted, no `contaminated` decision, every
 /// frame the monitor misses accounted for, and the fault named as from one link.
 fn two_paths(second_path_delay: Duration, name: &str) -> (Streamed, usize, usize) {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let path = root.join("tests/datasets/sitl.toml");
-    let truth = DatasetTruth::from_toml(
-        &std::fs::read_to_string(&path).unwrap(),
-        &path.display().to_string(),
-    )
-    .unwrap();
+    let (root, truth) = sitl_truth();
     let case = &truth.cases[0];
     let log = root.join("replay/tlogs").join(&case.file);
     let dir = common::temp_dir(name);
