@@ -150,7 +150,10 @@ impl Command {
             }
             Command::Calibrate(a) => vec![("--output", Some(a.output.as_path()))],
             Command::Benchmark(a) => vec![("--json", a.json.as_deref())],
-            Command::Scan(a) => vec![("--rows", Some(a.rows.as_path()))],
+            Command::Scan(a) => vec![
+                ("--rows", a.rows_path()),
+                ("--parquet", a.parquet.as_deref()),
+            ],
             Command::History(a) => vec![("--json", a.json.as_deref())],
             Command::Thresholds(_) | Command::Completions(_) | Command::Man(_) => vec![],
         };
@@ -168,9 +171,14 @@ pub struct ScanArgs {
     /// recursively for .tlog, .bin and .ulg), or glob patterns in quotes ('logs/**/*.tlog').
     #[arg(required = true, value_name = "PATH")]
     pub paths: Vec<PathBuf>,
-    /// Write the rows here (`-`: standard output, the default).
-    #[arg(long, value_name = "FILE.jsonl", default_value = "-")]
-    pub rows: PathBuf,
+    /// Write the rows as JSON lines here (`-`: standard output, the default unless
+    /// --parquet is given).
+    #[arg(long, value_name = "FILE.jsonl")]
+    pub rows: Option<PathBuf>,
+    /// Write the rows as a Parquet table here too (columns flattened: `mit_ukf_gamma`, ...;
+    /// the schema is in docs/fleet.md). `-`: standard output.
+    #[arg(long, value_name = "FILE.parquet")]
+    pub parquet: Option<PathBuf>,
     /// Logs replayed at once (default: one per core).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=1024))]
     pub jobs: Option<u16>,
@@ -181,6 +189,23 @@ pub struct ScanArgs {
     /// from its HEARTBEAT and parameters, calibrated in flight.
     #[arg(long, value_name = "NAME|FILE")]
     pub profile: Option<String>,
+    /// Which airframe each log belongs to: a TOML file of `[[airframe]]` entries, each a
+    /// `name` and the `logs` (glob patterns of paths) or `boards` (board ids) that are it.
+    /// Without one, `history` groups the flights by board id where the log carries it, else
+    /// by system id.
+    #[arg(long, value_name = "FILE.toml")]
+    pub airframes: Option<PathBuf>,
+}
+
+impl ScanArgs {
+    /// Where the JSON lines go: `--rows`, or standard output when no output is named.
+    pub fn rows_path(&self) -> Option<&std::path::Path> {
+        match (&self.rows, &self.parquet) {
+            (Some(r), _) => Some(r),
+            (None, None) => Some(std::path::Path::new("-")),
+            (None, Some(_)) => None,
+        }
+    }
 }
 
 #[derive(clap::Args)]

@@ -3,6 +3,7 @@
 //! Data flow: source → telemetry → estimators (MIT-UKF ‖ MIT-ESMF) → diagnosis → sinks.
 //! This crate holds the pure parts (model, estimate, sim, diagnose) and the evaluation harness.
 
+pub mod airframes;
 pub mod diagnose;
 pub mod estimate;
 pub mod eval;

@@ -271,3 +271,91 @@ fn the_external_archive_with_a_bad_file_is_scanned_whole() {
         }
     }
 }
+
+/// `--parquet` beside `--rows`: pyarrow and pandas read the table, every value equals the JSON
+/// line's (flattened), and the schema is the one docs/fleet.md states; `--airframes` names the
+/// logs its patterns match, and only those.
+#[test]
+fn the_parquet_table_is_the_rows_in_the_documented_schema() {
+    let dir = common::temp_dir("scan_parquet");
+    let (jsonl, table, map) = (
+        dir.join("rows.jsonl"),
+        dir.join("rows.parquet"),
+        dir.join("airframes.toml"),
+    );
+    let pattern = tlogs().join("sitl_quad_*/*.tlog");
+    std::fs::write(
+        &map,
+        format!(
+            "[[airframe]]\nname = \"quad-a\"\nlogs = [{:?}]\n",
+            pattern.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let (code, _, err) = ahcmon(&[
+        "scan",
+        tlogs().to_str().unwrap(),
+        "--rows",
+        jsonl.to_str().unwrap(),
+        "--parquet",
+        table.to_str().unwrap(),
+        "--airframes",
+        map.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let rows = rows(&std::fs::read_to_string(&jsonl).unwrap());
+    assert!(rows.len() >= 12, "{} rows", rows.len());
+    for r in &rows {
+        let file = r["file"].as_str().unwrap();
+        let want = file.contains("/sitl_quad_").then_some("quad-a");
+        assert_eq!(r["airframe"].as_str(), want, "{file}");
+    }
+    let out = common::run_python(&[
+        "tests/reference/parquet_rows.py",
+        jsonl.to_str().unwrap(),
+        table.to_str().unwrap(),
+    ]);
+    let mut lines = out.lines();
+    assert_eq!(
+        lines.next(),
+        Some(format!("ok {} rows 35 columns", rows.len()).as_str()),
+        "{out}"
+    );
+    let schema: Vec<(String, String, bool)> = serde_json::from_str(lines.next().unwrap()).unwrap();
+    // The documented schema: docs/fleet.md's table under "The Parquet table".
+    let doc =
+        std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/fleet.md"))
+            .unwrap();
+    let section = doc
+        .split("## The Parquet table")
+        .nth(1)
+        .expect("docs/fleet.md has a section `## The Parquet table`");
+    let section = section.split("\n## ").next().unwrap();
+    let documented: Vec<(String, String, bool)> = section
+        .lines()
+        .filter(|l| l.starts_with("| `"))
+        .map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            (
+                cells[1].trim_matches('`').to_string(),
+                cells[2].to_string(),
+                cells[3] == "yes",
+            )
+        })
+        .collect();
+    assert_eq!(schema, documented, "pyarrow's schema against the docs'");
+    // A row that does not fit the schema is impossible from scan; a table the scan cannot write
+    // leaves the JSON lines as they were: a directory as the table.
+    let before = std::fs::read(&jsonl).unwrap();
+    let (code, _, err) = ahcmon(&[
+        "scan",
+        tlogs().to_str().unwrap(),
+        "--rows",
+        jsonl.to_str().unwrap(),
+        "--parquet",
+        dir.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("cannot write"), "{err}");
+    assert_eq!(std::fs::read(&jsonl).unwrap(), before);
+}

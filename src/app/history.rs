@@ -63,6 +63,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
         };
         let airframe = row["airframe"]
             .as_str()
+            .or(row["board_uid"].as_str())
             .map(str::to_string)
             .unwrap_or_else(|| format!("sysid {}", row["sysid"]));
         series

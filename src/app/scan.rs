@@ -19,12 +19,19 @@ use std::path::{Path, PathBuf};
 const LOG_EXTENSIONS: [&str; 3] = ["tlog", "bin", "ulg"];
 
 pub fn run(a: ScanArgs) -> anyhow::Result<()> {
+    let rows_out = a.rows_path().map(Path::to_path_buf);
     let ScanArgs {
         paths,
-        rows: out,
+        parquet,
         jobs,
         profile,
+        airframes,
+        ..
     } = a;
+    let airframes = airframes
+        .as_deref()
+        .map(ahcmon::airframes::Airframes::load)
+        .transpose()?;
     let config = ahcmon::pipeline::PipelineConfig {
         profile: profile
             .as_deref()
@@ -57,13 +64,25 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
     }
     // Against every log found, not only the paths named (a glob may match the rows file).
     let inputs: Vec<&Path> = logs.iter().map(PathBuf::as_path).collect();
-    check_outputs(&inputs, &[("--rows", Some(&out))])?;
-    // Open (not empty) the output before the long work, so a path that cannot be written
+    check_outputs(
+        &inputs,
+        &[
+            ("--rows", rows_out.as_deref()),
+            ("--parquet", parquet.as_deref()),
+        ],
+    )?;
+    // Open (not empty) the outputs before the long work, so a path that cannot be written
     // fails at once.
-    let mut file = std::io::BufWriter::new(
-        ahcmon::output::file::OutputFile::open(&out)
-            .with_context(|| format!("cannot write {}", out.display()))?,
-    );
+    let open = |p: &Path| {
+        ahcmon::output::file::OutputFile::open(p)
+            .with_context(|| format!("cannot write {}", p.display()))
+    };
+    let mut file = rows_out
+        .as_deref()
+        .map(open)
+        .transpose()?
+        .map(std::io::BufWriter::new);
+    let mut parquet_file = parquet.as_deref().map(open).transpose()?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.map_or(0, usize::from))
         .stack_size(8 << 20)
@@ -76,7 +95,7 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
             .map(|path| {
                 // A panic in one log's replay is that log's failure, not the scan's.
                 let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    scan_log(path, &config)
+                    scan_log(path, &config, airframes.as_ref())
                 }))
                 .unwrap_or_else(|_| {
                     Err("internal error while replaying it (a bug: please report the log)".into())
@@ -88,33 +107,56 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
     });
     progress.clear();
     let mut failed: Vec<(String, String)> = Vec::new();
-    let (mut written, mut flightless) = (0usize, 0usize);
+    let mut flightless = 0usize;
+    let mut all_rows: Vec<Value> = Vec::new();
     for (path, result) in logs.iter().zip(results) {
         match result {
             Ok(rows) => {
                 flightless += usize::from(rows.is_empty());
-                for row in rows {
-                    serde_json::to_writer(&mut file, &row)?;
-                    file.write_all(b"\n")?;
-                    written += 1;
-                }
+                all_rows.extend(rows);
             }
             Err(why) => failed.push((path.display().to_string(), why)),
         }
+    }
+    let written = all_rows.len();
+    // The table is made (and every row checked against its schema) before either file is
+    // written, so a row that does not fit leaves both files as they were.
+    let table = parquet_file
+        .is_some()
+        .then(|| ahcmon::output::parquet::to_parquet(&all_rows))
+        .transpose()
+        .context("--parquet")?;
+    if let Some(file) = &mut file {
+        for row in &all_rows {
+            serde_json::to_writer(&mut *file, row)?;
+            file.write_all(b"\n")?;
+        }
+    }
+    if let (Some(out), Some(table)) = (&mut parquet_file, &table) {
+        out.write_all(table)
+            .and_then(|()| out.flush())
+            .with_context(|| {
+                format!(
+                    "cannot write {}",
+                    parquet.as_deref().unwrap_or(Path::new("-")).display()
+                )
+            })?;
     }
     failed.extend(
         unreadable
             .iter()
             .map(|(p, e)| (p.display().to_string(), e.clone())),
     );
-    // A scan that wrote no row leaves no earlier run's rows behind.
-    if written == 0 {
-        file.get_mut()
-            .empty()
+    if let (Some(file), Some(out)) = (&mut file, &rows_out) {
+        // A scan that wrote no row leaves no earlier run's rows behind.
+        if written == 0 {
+            file.get_mut()
+                .empty()
+                .with_context(|| format!("cannot write {}", out.display()))?;
+        }
+        file.flush()
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
-    file.flush()
-        .with_context(|| format!("cannot write {}", out.display()))?;
     for (path, why) in &failed {
         tracing::warn!("scan: {path}: {why}");
     }
@@ -234,7 +276,11 @@ fn walk(dir: &Path, x: &mut Expanded) {
 }
 
 /// One log through its own monitor: its rows, or why it could not be read.
-fn scan_log(path: &Path, config: &ahcmon::pipeline::PipelineConfig) -> Result<Vec<Value>, String> {
+fn scan_log(
+    path: &Path,
+    config: &ahcmon::pipeline::PipelineConfig,
+    airframes: Option<&ahcmon::airframes::Airframes>,
+) -> Result<Vec<Value>, String> {
     let mut monitor = Monitor::new(config.clone());
     let mut sink = FlightSink::default();
     let format = std::fs::File::open(path)
@@ -268,5 +314,22 @@ fn scan_log(path: &Path, config: &ahcmon::pipeline::PipelineConfig) -> Result<Ve
         info.dropped = report.counters.dropped();
     }
     monitor.finish(&mut sink);
-    Ok(rows(&monitor, &sink, &info))
+    let mut rows = rows(&monitor, &sink, &info);
+    if let Some(airframes) = airframes {
+        let mut said = false;
+        for row in &mut rows {
+            let names = airframes.names_for(path, row["board_uid"].as_str());
+            if names.len() > 1 && !said {
+                tracing::warn!(
+                    "scan: {}: named by airframes {} in the airframes file; taken as {}",
+                    path.display(),
+                    names.join(", "),
+                    names[0]
+                );
+                said = true;
+            }
+            row["airframe"] = names.first().map_or(Value::Null, |&n| n.into());
+        }
+    }
+    Ok(rows)
 }

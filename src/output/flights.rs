@@ -181,8 +181,6 @@ pub struct LogInfo {
     pub format: &'static str,
     /// The first record's time (µs since the Unix epoch), where the log has one (tlog).
     pub start_unix_us: Option<u64>,
-    /// The airframe the user's mapping names for this file.
-    pub airframe: Option<String>,
     /// Frames or messages the reader dropped (bad checksums, cut records, unknown ids).
     pub dropped: u64,
 }
@@ -200,7 +198,9 @@ pub fn rows(monitor: &Monitor, sink: &FlightSink, log: &LogInfo) -> Vec<Value> {
         let base = json!({
             "file": log.file,
             "format": log.format,
-            "airframe": log.airframe,
+            // Set by `scan` from the user's mapping (`crate::airframes`).
+            "airframe": null,
+            "board_uid": v.info.board_uid,
             "sysid": sysid,
             "vehicle_type": v.info.mav_type.map(|t| format!("{t:?}")
                 .trim_start_matches("MAV_TYPE_")

@@ -7,6 +7,7 @@ pub mod file;
 pub mod flights;
 pub mod jsonl;
 pub mod matrix;
+pub mod parquet;
 pub mod plot;
 pub mod png;
 pub mod summary;

@@ -3,6 +3,7 @@
 pub mod assembler;
 pub mod detect;
 pub mod encode;
+pub mod identity;
 pub mod profile;
 pub mod record;
 

@@ -7,6 +7,7 @@
 //! never gets them is counted as `unmatched`.
 
 use crate::protocol::dialects::ahcmon::{MavAutopilot, MavMessage, MavModeFlag, MavType};
+use crate::telemetry::identity;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -115,6 +116,8 @@ pub struct VehicleInfo {
     pub armed: bool,
     pub params: BTreeMap<String, f32>,
     pub statustext: Vec<String>,
+    /// The board's identity (`telemetry::identity`), from the first message that gives one.
+    pub board_uid: Option<String>,
 }
 
 impl VehicleInfo {
@@ -272,6 +275,16 @@ impl VehicleAssembler {
         }
     }
 
+    /// A text the vehicle sent or logged: kept (the first 1000), and its board id read.
+    fn note_text(&mut self, text: &str) {
+        if self.info.statustext.len() < 1000 {
+            self.info.statustext.push(text.to_string());
+        }
+        if self.info.board_uid.is_none() {
+            self.info.board_uid = identity::from_banner(text);
+        }
+    }
+
     fn is_autopilot_component(&self, compid: u8) -> bool {
         match self.info.compid {
             Some(c) => c == compid,
@@ -367,10 +380,13 @@ impl VehicleAssembler {
                 None
             }
             MavMessage::STATUSTEXT(s) => {
-                if self.info.statustext.len() < 1000 {
-                    self.info
-                        .statustext
-                        .push(s.text.to_str().unwrap_or("").to_string());
+                let text = s.text.to_str().unwrap_or("");
+                self.note_text(text);
+                None
+            }
+            MavMessage::AUTOPILOT_VERSION(v) => {
+                if self.info.board_uid.is_none() {
+                    self.info.board_uid = identity::from_autopilot_version(v.uid, &v.uid2);
                 }
                 None
             }

@@ -39,9 +39,7 @@ impl VehicleAssembler {
                 None
             }
             Record::Text(text) => {
-                if self.info.statustext.len() < 1000 {
-                    self.info.statustext.push(text.clone());
-                }
+                self.note_text(text);
                 None
             }
             Record::RelAlt(h) => {
