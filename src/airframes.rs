@@ -5,15 +5,27 @@
 //! [[airframe]]
 //! name = "quad-07"
 //! logs = ["archive/quad07/**/*.tlog"]          # glob patterns of the logs' paths
-//! boards = ["CubeOrange 003A002D 3138510F 33393935"]  # board ids, as the rows' board_uid
+//! boards = ["mcu 003A002D 3138510F 33393935"]  # board ids, as the rows' board_uid (or the
+//!                                               # boot banner "CubeOrange 003A002D ...")
 //! ```
 //!
 //! A log's airframe is the first entry, in file order, that names its path or its vehicle's
-//! board; a log that two entries name is said once per scan (the first wins).
+//! board; a log that two entries name is said (the first wins). Patterns match the path as
+//! `scan` names it: as given on its command line, or the directory given joined with the
+//! names under it (`scan ./archive` gives `./archive/...`); `*` stays within one directory,
+//! `**` crosses them. In a log of several vehicles the name its path matched is given to
+//! each as `NAME sysid N`.
 
 use crate::toml_file::{TomlFileError, parse, read_at_most};
 use serde::Deserialize;
 use std::path::Path;
+
+/// `*` and `?` do not cross a `/`; `**` does.
+const MATCH: glob::MatchOptions = glob::MatchOptions {
+    case_sensitive: true,
+    require_literal_separator: true,
+    require_literal_leading_dot: false,
+};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -93,7 +105,15 @@ impl Airframes {
                     .iter()
                     .filter_map(|p| glob::Pattern::new(p).ok())
                     .collect(),
-                boards: e.boards.iter().map(|b| b.trim().to_string()).collect(),
+                // As the rows give it: a banner ("CubeOrange 003A002D ...") as its MCU id.
+                boards: e
+                    .boards
+                    .iter()
+                    .map(|b| {
+                        crate::telemetry::identity::from_banner(b)
+                            .unwrap_or_else(|| b.trim().to_string())
+                    })
+                    .collect(),
             })
             .collect();
         Ok(Self { entries })
@@ -104,7 +124,7 @@ impl Airframes {
         self.entries
             .iter()
             .filter(|a| {
-                a.logs.iter().any(|p| p.matches_path(log))
+                a.logs.iter().any(|p| p.matches_path_with(log, MATCH))
                     || board_uid.is_some_and(|b| a.boards.iter().any(|x| x == b))
             })
             .map(|a| a.name.as_str())
@@ -134,10 +154,7 @@ logs = ["archive/*/shared.tlog"]
         let p = Path::new;
         assert_eq!(a.names_for(p("archive/quad07/f1.tlog"), None), ["quad-07"]);
         assert_eq!(
-            a.names_for(
-                p("elsewhere/x.bin"),
-                Some("CubeOrange 003A002D 3138510F 33393935")
-            ),
+            a.names_for(p("elsewhere/x.bin"), Some("mcu 003A002D 3138510F 33393935")),
             ["hexa-01"]
         );
         assert_eq!(
@@ -145,6 +162,11 @@ logs = ["archive/*/shared.tlog"]
             ["quad-07", "hexa-01"]
         );
         assert!(a.names_for(p("other/f.tlog"), Some("X 1 2 3")).is_empty());
+        assert!(
+            a.names_for(p("archive/quad07/old/f1.tlog"), None)
+                .is_empty(),
+            "* stays within a directory"
+        );
     }
 
     #[test]

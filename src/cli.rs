@@ -154,7 +154,9 @@ impl Command {
                 ("--rows", a.rows_path()),
                 ("--parquet", a.parquet.as_deref()),
             ],
-            Command::History(a) => vec![("--json", a.json.as_deref())],
+            Command::History(a) => {
+                vec![("--json", a.json.as_deref()), ("--plot", a.plot.as_deref())]
+            }
             Command::Thresholds(_) | Command::Completions(_) | Command::Man(_) => vec![],
         };
         flags
@@ -229,6 +231,11 @@ pub struct HistoryArgs {
     /// standard output, the table then on standard error).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Draw the series (SVG, or PNG for a .png name): per airframe × actuator its flights'
+    /// gamma with bounds, the fitted line, the loss gain and the alarm; alarms first, at most
+    /// 48 panels.
+    #[arg(long, value_name = "FILE.svg|png")]
+    pub plot: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]

@@ -114,6 +114,109 @@ pub fn first_alarm(points: &[Point], rule: &HistoryRule) -> Option<(usize, Trend
     })
 }
 
+/// One flight of a series, in the order it is sorted by.
+#[derive(Debug, Clone)]
+pub struct Flight {
+    pub start: Option<u64>,
+    pub file: String,
+    pub point: Point,
+}
+
+/// Flights by start time, those without one after them, then by file name.
+pub fn order(flights: &mut [Flight]) {
+    flights.sort_by(|a, b| {
+        (a.start.is_none(), a.start, &a.file).cmp(&(b.start.is_none(), b.start, &b.file))
+    });
+}
+
+/// One airframe × actuator's flights, in order, its trend over the last window and its first
+/// alarm.
+#[derive(Debug, Clone)]
+pub struct Series {
+    pub airframe: String,
+    pub actuator: String,
+    pub flights: Vec<Flight>,
+    pub trend: Option<Trend>,
+    /// The flight index (0-based) of the first alarm.
+    pub alarm: Option<usize>,
+    /// Some flights have a start time and some do not (those go last, by name).
+    pub mixed_start_times: bool,
+}
+
+impl Series {
+    /// As `history --json` writes it (flights counted from 1).
+    pub fn json(&self) -> serde_json::Value {
+        use serde_json::json;
+        json!({
+            "airframe": self.airframe,
+            "actuator": self.actuator,
+            "flights": self.flights.iter().map(|f| json!({
+                "file": f.file, "start_unix_us": f.start,
+                "gamma": f.point.gamma, "gamma_lo": f.point.lo, "gamma_hi": f.point.hi,
+            })).collect::<Vec<_>>(),
+            "trend": self.trend.map(|t| json!({
+                "slope": t.slope, "slope_se": t.slope_se, "intercept": t.intercept,
+                "reaches_loss_at_flight": t.crossing.filter(|c| c.is_finite()).map(|c| c + 1.0),
+            })),
+            "alarm_from_flight": self.alarm.map(|k| k + 1),
+        })
+    }
+}
+
+/// `scan`'s rows grouped per airframe × actuator (the airframe the user named, else the
+/// board id, else `sysid N`), each series ordered, fitted over its last window and judged.
+/// Rows without an actuator's MIT-UKF gamma (a vehicle never estimated) are left out.
+pub fn series(rows: &[serde_json::Value], rule: &HistoryRule) -> Vec<Series> {
+    let mut groups: std::collections::BTreeMap<(String, String), Vec<Flight>> =
+        std::collections::BTreeMap::new();
+    for row in rows {
+        let (Some(actuator), Some(gamma)) =
+            (row["actuator"].as_str(), row["mit_ukf"]["gamma"].as_f64())
+        else {
+            continue;
+        };
+        let airframe = row["airframe"]
+            .as_str()
+            .or(row["board_uid"].as_str())
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("sysid {}", row["sysid"]));
+        groups
+            .entry((airframe, actuator.to_string()))
+            .or_default()
+            .push(Flight {
+                start: row["start_unix_us"].as_u64(),
+                file: row["file"].as_str().unwrap_or_default().to_string(),
+                point: Point {
+                    gamma,
+                    lo: row["mit_ukf"]["gamma_lo"].as_f64().unwrap_or(f64::NAN),
+                    hi: row["mit_ukf"]["gamma_hi"].as_f64().unwrap_or(f64::NAN),
+                },
+            });
+    }
+    groups
+        .into_iter()
+        .map(|((airframe, actuator), mut flights)| {
+            order(&mut flights);
+            let points: Vec<Point> = flights.iter().map(|f| f.point).collect();
+            let last = points.len() - 1;
+            Series {
+                mixed_start_times: flights.iter().any(|f| f.start.is_none())
+                    && flights.iter().any(|f| f.start.is_some()),
+                trend: fit(
+                    &points,
+                    (last + 1).saturating_sub(rule.window),
+                    last,
+                    rule.loss_gamma,
+                ),
+                alarm: first_alarm(&points, rule).map(|(k, _)| k),
+                airframe,
+                actuator,
+                flights,
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,5 +265,27 @@ mod tests {
         assert!(t.crossing.unwrap() > k as f64, "{t:?}");
         let flat: Vec<f64> = scatter.iter().map(|s| 1.0 + s).collect();
         assert_eq!(first_alarm(&points(&flat), &rule), None);
+    }
+
+    #[test]
+    fn flights_go_by_start_time_then_those_without_by_name() {
+        let f = |start: Option<u64>, file: &str| Flight {
+            start,
+            file: file.into(),
+            point: Point {
+                gamma: 1.0,
+                lo: 0.9,
+                hi: 1.1,
+            },
+        };
+        let mut flights = vec![
+            f(None, "a.bin"),
+            f(Some(30), "b.tlog"),
+            f(Some(10), "z.tlog"),
+            f(None, "0.ulg"),
+        ];
+        order(&mut flights);
+        let names: Vec<&str> = flights.iter().map(|f| f.file.as_str()).collect();
+        assert_eq!(names, ["z.tlog", "b.tlog", "0.ulg", "a.bin"]);
     }
 }

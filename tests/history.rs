@@ -91,13 +91,21 @@ fn a_slowly_weakening_motor_is_flagged_before_it_is_lost_and_no_healthy_one_is()
     let (code, _, err) = ahcmon(&args);
     assert_eq!(code, 0, "{err}");
     let report = dir.join("history.json");
+    let plot = report.with_extension("png");
     let (code, out, err) = ahcmon(&[
         "history",
         rows.to_str().unwrap(),
         "--json",
         report.to_str().unwrap(),
+        "--plot",
+        plot.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
+    let png = std::fs::read(&plot).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "--plot .png writes a PNG"
+    );
     let doc: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let series = doc["series"].as_array().unwrap();
     assert_eq!(series.len(), 8, "{out}");

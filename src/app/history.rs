@@ -1,27 +1,12 @@
-//! `ahcmon history`: `scan`'s rows grouped per airframe (its system id where no airframe is
-//! named) × actuator, flights in start-time order, each series fitted and judged by the rule
-//! in `ahcmon::history`.
+//! `ahcmon history`: `scan`'s rows grouped per airframe (else board id, else system id) ×
+//! actuator, flights in start-time order, each series fitted and judged by the rule in
+//! `ahcmon::history` (`series`); the table, `--json` and `--plot`.
 
 use super::{InputFileError, UsageError, check_outputs, in_range};
 use crate::cli::HistoryArgs;
-use ahcmon::history::{HistoryRule, Point, first_alarm, fit};
+use ahcmon::history::{HistoryRule, series};
 use anyhow::Context;
 use serde_json::{Value, json};
-use std::collections::BTreeMap;
-
-/// Flights by start time, those without one after them, then by file name.
-fn order(flights: &mut [Flight]) {
-    flights.sort_by(|a, b| {
-        (a.start.is_none(), a.start, &a.file).cmp(&(b.start.is_none(), b.start, &b.file))
-    });
-}
-
-/// One flight of a series, in the order it is sorted by.
-struct Flight {
-    start: Option<u64>,
-    file: String,
-    point: Point,
-}
 
 pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
     let HistoryArgs {
@@ -31,8 +16,12 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
         window,
         t_alarm,
         json: json_out,
+        plot,
     } = a;
-    check_outputs(&[rows.as_path()], &[("--json", json_out.as_deref())])?;
+    check_outputs(
+        &[rows.as_path()],
+        &[("--json", json_out.as_deref()), ("--plot", plot.as_deref())],
+    )?;
     let rule = HistoryRule {
         loss_gamma: in_range("--loss-gamma", loss_gamma, 0.0, 2.0)?,
         horizon: in_range("--horizon", horizon, 0.0, 1e6)?,
@@ -43,42 +32,21 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
         path: rows.display().to_string(),
         source,
     })?;
-    let mut series: BTreeMap<(String, String), Vec<Flight>> = BTreeMap::new();
+    let mut parsed = Vec::new();
     for (n, line) in text
         .lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
     {
-        let row: Value = serde_json::from_str(line).map_err(|e| {
+        parsed.push(serde_json::from_str::<Value>(line).map_err(|e| {
             UsageError(format!(
                 "{}:{}: not a JSON row ({e})",
                 rows.display(),
                 n + 1
             ))
-        })?;
-        let (Some(actuator), Some(gamma)) =
-            (row["actuator"].as_str(), row["mit_ukf"]["gamma"].as_f64())
-        else {
-            continue;
-        };
-        let airframe = row["airframe"]
-            .as_str()
-            .or(row["board_uid"].as_str())
-            .map(str::to_string)
-            .unwrap_or_else(|| format!("sysid {}", row["sysid"]));
-        series
-            .entry((airframe, actuator.to_string()))
-            .or_default()
-            .push(Flight {
-                start: row["start_unix_us"].as_u64(),
-                file: row["file"].as_str().unwrap_or_default().to_string(),
-                point: Point {
-                    gamma,
-                    lo: row["mit_ukf"]["gamma_lo"].as_f64().unwrap_or(f64::NAN),
-                    hi: row["mit_ukf"]["gamma_hi"].as_f64().unwrap_or(f64::NAN),
-                },
-            });
+        })?);
     }
+    let series = series(&parsed, &rule);
     if series.is_empty() {
         return Err(UsageError(format!(
             "{}: no row with an actuator's MIT-UKF gamma (ahcmon scan's rows?)",
@@ -101,27 +69,20 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
     );
     let mut doc = Vec::new();
     let mut alarms = 0;
-    for ((airframe, actuator), mut flights) in series {
-        order(&mut flights);
-        if flights.iter().any(|f| f.start.is_none()) && flights.iter().any(|f| f.start.is_some()) {
+    for s in &series {
+        let (airframe, actuator, flights) = (&s.airframe, &s.actuator, &s.flights);
+        if s.mixed_start_times {
             tracing::warn!(
                 "history: {airframe} {actuator}: some flights have no start time (a DataFlash or ULog log): they are put after those that have, by file name"
             );
         }
-        let points: Vec<Point> = flights.iter().map(|f| f.point).collect();
-        let last = points.len() - 1;
-        let trend = fit(
-            &points,
-            (last + 1).saturating_sub(rule.window),
-            last,
-            rule.loss_gamma,
-        );
-        let alarm = first_alarm(&points, &rule);
-        alarms += usize::from(alarm.is_some());
+        let last = flights.len() - 1;
+        let trend = s.trend;
+        alarms += usize::from(s.alarm.is_some());
         outln!(
             "{airframe:<12} {actuator:<9} {:>7} {:>7.3} {:>16} {:>9}  {}",
-            points.len(),
-            points[last].gamma,
+            flights.len(),
+            flights[last].point.gamma,
             trend.map_or("-".into(), |t| format!(
                 "{:+.4} ± {:.4}",
                 t.slope, t.slope_se
@@ -133,58 +94,34 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
                     "flight {:.0}",
                     (c + 1.0).ceil().max(1.0)
                 )),
-            alarm.map_or(String::new(), |(k, _)| format!(
+            s.alarm.map_or(String::new(), |k| format!(
                 "ALARM from flight {} ({})",
                 k + 1,
                 flights[k].file
             )),
         );
-        doc.push(json!({
-            "airframe": airframe,
-            "actuator": actuator,
-            "flights": flights.iter().map(|f| json!({
-                "file": f.file, "start_unix_us": f.start,
-                "gamma": f.point.gamma, "gamma_lo": f.point.lo, "gamma_hi": f.point.hi,
-            })).collect::<Vec<_>>(),
-            "trend": trend.map(|t| json!({
-                "slope": t.slope, "slope_se": t.slope_se, "intercept": t.intercept,
-                "reaches_loss_at_flight": t.crossing.filter(|c| c.is_finite()).map(|c| c + 1.0),
-            })),
-            "alarm_from_flight": alarm.map(|(k, _)| k + 1),
-        }));
+        doc.push(s.json());
     }
     outln!("{alarms} alarms");
+    if let Some(p) = plot {
+        let svg = ahcmon::output::history_plot::render(
+            &series,
+            &rule,
+            &format!("ahcmon history {}", rows.display()),
+        );
+        let bytes = if ahcmon::output::png::is_png(&p) {
+            ahcmon::output::png::from_svg(&svg)
+                .with_context(|| format!("cannot draw {}", p.display()))?
+        } else {
+            svg.into_bytes()
+        };
+        ahcmon::output::file::write_whole(&p, &bytes)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
     if let Some(p) = json_out {
         let text = serde_json::to_string_pretty(&json!({ "series": doc }))? + "\n";
         ahcmon::output::file::write_whole(&p, text.as_bytes())
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn flights_go_by_start_time_then_those_without_by_name() {
-        let f = |start: Option<u64>, file: &str| Flight {
-            start,
-            file: file.into(),
-            point: Point {
-                gamma: 1.0,
-                lo: 0.9,
-                hi: 1.1,
-            },
-        };
-        let mut flights = vec![
-            f(None, "a.bin"),
-            f(Some(30), "b.tlog"),
-            f(Some(10), "z.tlog"),
-            f(None, "0.ulg"),
-        ];
-        order(&mut flights);
-        let names: Vec<&str> = flights.iter().map(|f| f.file.as_str()).collect();
-        assert_eq!(names, ["z.tlog", "b.tlog", "0.ulg", "a.bin"]);
-    }
 }

@@ -6,9 +6,7 @@
 
 use super::{Progress, UsageError, check_outputs};
 use crate::cli::ScanArgs;
-use ahcmon::link::{LogFormat, LogItem, TlogReader, read_log, sniff};
-use ahcmon::monitor::Monitor;
-use ahcmon::output::flights::{FlightSink, LogInfo, rows};
+use ahcmon::output::flights::log_rows;
 use anyhow::Context;
 use rayon::prelude::*;
 use serde_json::Value;
@@ -83,6 +81,7 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
         .transpose()?
         .map(std::io::BufWriter::new);
     let mut parquet_file = parquet.as_deref().map(open).transpose()?;
+    let want_table = parquet.is_some();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.map_or(0, usize::from))
         .stack_size(8 << 20)
@@ -95,10 +94,21 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
             .map(|path| {
                 // A panic in one log's replay is that log's failure, not the scan's.
                 let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    scan_log(path, &config, airframes.as_ref())
+                    log_rows(path, &config, airframes.as_ref())
                 }))
                 .unwrap_or_else(|_| {
                     Err("internal error while replaying it (a bug: please report the log)".into())
+                })
+                // A row the table cannot hold (a garbled start time past i64) is this log's
+                // failure, found here so that the other logs' rows are still written.
+                .and_then(|rows| {
+                    if want_table {
+                        ahcmon::output::parquet::to_parquet(&rows)
+                            .map(|_| rows)
+                            .map_err(|e| format!("its rows do not fit the Parquet table: {e}"))
+                    } else {
+                        Ok(rows)
+                    }
                 });
                 progress.step(&path.display().to_string());
                 r
@@ -119,6 +129,11 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
         }
     }
     let written = all_rows.len();
+    if airframes.is_some() && written > 0 && all_rows.iter().all(|r| r["airframe"].is_null()) {
+        tracing::warn!(
+            "scan: the airframes file names none of the logs scanned (its patterns match the paths as scan names them: as given, or the directory given joined with the names under it)"
+        );
+    }
     // The table is made (and every row checked against its schema) before either file is
     // written, so a row that does not fit leaves both files as they were.
     let table = parquet_file
@@ -273,63 +288,4 @@ fn walk(dir: &Path, x: &mut Expanded) {
             Err(e) => x.unreadable.push((path, e.to_string())),
         }
     }
-}
-
-/// One log through its own monitor: its rows, or why it could not be read.
-fn scan_log(
-    path: &Path,
-    config: &ahcmon::pipeline::PipelineConfig,
-    airframes: Option<&ahcmon::airframes::Airframes>,
-) -> Result<Vec<Value>, String> {
-    let mut monitor = Monitor::new(config.clone());
-    let mut sink = FlightSink::default();
-    let format = std::fs::File::open(path)
-        .and_then(sniff)
-        .map_err(|e| e.to_string())?;
-    let mut info = LogInfo {
-        file: path.display().to_string(),
-        format: format.name(),
-        ..LogInfo::default()
-    };
-    if format == LogFormat::Tlog {
-        let mut reader = TlogReader::open(path).map_err(|e| e.to_string())?;
-        while let Some((ts, frame)) = reader.next_frame().map_err(|e| e.to_string())? {
-            info.start_unix_us.get_or_insert(ts);
-            monitor.on_frame(&frame, &mut sink);
-        }
-        if reader.counters.frames == 0 {
-            return Err("no MAVLink frame of a known message: not a telemetry log".into());
-        }
-        info.dropped = reader.counters.dropped();
-    } else {
-        let (_, report) = read_log(
-            path,
-            &mut |item| match item {
-                LogItem::Frame(f) => monitor.on_frame(f, &mut sink),
-                LogItem::Record(r) => monitor.on_record(1, r, &mut sink),
-            },
-            &mut |_| {},
-        )
-        .map_err(|e| format!("{}: {e}", format.name()))?;
-        info.dropped = report.counters.dropped();
-    }
-    monitor.finish(&mut sink);
-    let mut rows = rows(&monitor, &sink, &info);
-    if let Some(airframes) = airframes {
-        let mut said = false;
-        for row in &mut rows {
-            let names = airframes.names_for(path, row["board_uid"].as_str());
-            if names.len() > 1 && !said {
-                tracing::warn!(
-                    "scan: {}: named by airframes {} in the airframes file; taken as {}",
-                    path.display(),
-                    names.join(", "),
-                    names[0]
-                );
-                said = true;
-            }
-            row["airframe"] = names.first().map_or(Value::Null, |&n| n.into());
-        }
-    }
-    Ok(rows)
 }

@@ -14,10 +14,12 @@ use super::Sink;
 use super::summary::actuator_state;
 use crate::diagnose::vehicle::{Decision, Event};
 use crate::estimate::vehicle::AhcEstimate;
+use crate::link::{LogFormat, LogItem, TlogReader, read_log, sniff};
 use crate::monitor::Monitor;
 use crate::telemetry::Profile;
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
+use std::path::Path;
 
 /// Histogram bin width: the medians' resolution.
 pub const BIN: f64 = 1e-3;
@@ -244,6 +246,79 @@ pub fn rows(monitor: &Monitor, sink: &FlightSink, log: &LogInfo) -> Vec<Value> {
         }
     }
     out
+}
+
+/// One log through its own monitor: its rows (the airframe set where `airframes` names it),
+/// or why it could not be read.
+pub fn log_rows(
+    path: &Path,
+    config: &crate::pipeline::PipelineConfig,
+    airframes: Option<&crate::airframes::Airframes>,
+) -> Result<Vec<Value>, String> {
+    let mut monitor = Monitor::new(config.clone());
+    let mut sink = FlightSink::default();
+    let format = std::fs::File::open(path)
+        .and_then(sniff)
+        .map_err(|e| e.to_string())?;
+    let mut info = LogInfo {
+        file: path.display().to_string(),
+        format: format.name(),
+        ..LogInfo::default()
+    };
+    if format == LogFormat::Tlog {
+        let mut reader = TlogReader::open(path).map_err(|e| e.to_string())?;
+        while let Some((ts, frame)) = reader.next_frame().map_err(|e| e.to_string())? {
+            info.start_unix_us.get_or_insert(ts);
+            monitor.on_frame(&frame, &mut sink);
+        }
+        if reader.counters.frames == 0 {
+            return Err("no MAVLink frame of a known message: not a telemetry log".into());
+        }
+        info.dropped = reader.counters.dropped();
+    } else {
+        let (_, report) = read_log(
+            path,
+            &mut |item| match item {
+                LogItem::Frame(f) => monitor.on_frame(f, &mut sink),
+                LogItem::Record(r) => monitor.on_record(1, r, &mut sink),
+            },
+            &mut |_| {},
+        )
+        .map_err(|e| format!("{}: {e}", format.name()))?;
+        info.dropped = report.counters.dropped();
+    }
+    monitor.finish(&mut sink);
+    let mut rows = rows(&monitor, &sink, &info);
+    if let Some(airframes) = airframes {
+        let mut said = false;
+        // A log of several vehicles is several airframes: the name its path matched is told
+        // apart by system id (a board id names one vehicle already).
+        let vehicles: std::collections::BTreeSet<u64> =
+            rows.iter().filter_map(|r| r["sysid"].as_u64()).collect();
+        for row in &mut rows {
+            let board = row["board_uid"].as_str();
+            let by_board =
+                board.is_some_and(|b| !airframes.names_for(Path::new(""), Some(b)).is_empty());
+            let names = airframes.names_for(path, board);
+            if names.len() > 1 && !said {
+                tracing::warn!(
+                    "scan: {}: named by airframes {} in the airframes file; taken as {}",
+                    path.display(),
+                    names.join(", "),
+                    names[0]
+                );
+                said = true;
+            }
+            row["airframe"] = match names.first() {
+                None => Value::Null,
+                Some(&n) if vehicles.len() > 1 && !by_board => {
+                    format!("{n} sysid {}", row["sysid"]).into()
+                }
+                Some(&n) => n.into(),
+            };
+        }
+    }
+    Ok(rows)
 }
 
 #[cfg(test)]

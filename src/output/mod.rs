@@ -5,6 +5,7 @@ pub mod alerts;
 pub mod dashboard;
 pub mod file;
 pub mod flights;
+pub mod history_plot;
 pub mod jsonl;
 pub mod matrix;
 pub mod parquet;

@@ -594,7 +594,7 @@ fn the_board_id_comes_from_autopilot_version_or_the_boot_banner_first_one_kept()
     );
     assert_eq!(
         a.info.board_uid.as_deref(),
-        Some("CubeOrange 003A002D 3138510F 33393935")
+        Some("mcu 003A002D 3138510F 33393935")
     );
     let mut b = VehicleAssembler::new(1, AssemblerConfig::default());
     feed(&mut b, &[version(0xABCD)]);
