@@ -72,10 +72,11 @@ pub enum Command {
     /// read, or some paths named nothing (their rows are missing, the others' written); 2: no
     /// log at all, or the command line.
     Scan(ScanArgs),
-    /// Health over flights, from `scan`'s rows: per airframe (or system id) × actuator, the
-    /// MIT-UKF's median gamma flight by flight, its weighted trend over the last flights, and
-    /// an alarm when it falls beyond --t-alarm standard errors and is predicted to reach
-    /// --loss-gamma within --horizon flights (docs/fleet.md). Exit 0 with or without alarms.
+    /// Health over flights, from `scan`'s rows: per airframe (else board id, else system id) ×
+    /// actuator, the MIT-UKF's median gamma flight by flight, its weighted trend over the last
+    /// flights, and an alarm when it falls faster than chance explains at --false-alarm and
+    /// is predicted to reach --loss-gamma within --horizon flights (docs/fleet.md). Exit 0
+    /// with or without alarms.
     History(HistoryArgs),
     /// Replay labelled logs and score the fault decisions against their truth: per log the
     /// first fault decision at or after the onset (actuator, delay, class), the fault decisions
@@ -221,12 +222,14 @@ pub struct HistoryArgs {
     /// Alarm when the loss is predicted within this many flights.
     #[arg(long, default_value_t = 10.0, value_name = "FLIGHTS")]
     pub horizon: f64,
-    /// Flights fitted, the last ones up to the flight judged (at least 4).
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(4..=1000))]
+    /// Flights fitted, the last ones up to the flight judged (fewer at a series' start, from
+    /// 4 on).
+    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u16).range(4..=1000))]
     pub window: u16,
-    /// Standard errors the falling slope must pass.
-    #[arg(long, default_value_t = 4.0, value_name = "T")]
-    pub t_alarm: f64,
+    /// Probability, per flight judged, that a healthy series' slope passes the alarm's test by
+    /// chance (its threshold is Student's t quantile at the fit's degrees of freedom).
+    #[arg(long, default_value_t = 0.001, value_name = "P")]
+    pub false_alarm: f64,
     /// Also write every series with its points, trend and alarm as one JSON document (`-`:
     /// standard output, the table then on standard error).
     #[arg(long, value_name = "FILE")]

@@ -9,14 +9,16 @@
 //! much tighter than one step's bounds), so the slope's standard error is scaled by the
 //! weighted residuals: `se(b)² = s² / Σ w (k - k̄)²`, `s² = Σ w r² / (n - 2)`.
 //!
-//! **Alarm** at a flight, from the last [`HistoryRule::window`] flights up to it (a flight is
-//! judged once that many are there): the slope is negative beyond [`HistoryRule::t_alarm`]
-//! standard errors (`b / se(b) < -t_alarm`), and the line crosses
-//! [`HistoryRule::loss_gamma`] within [`HistoryRule::horizon`] flights after it. With 8 usable
-//! points (6 degrees of freedom), were the flights' scatter about the line normal and their
-//! weights right, a healthy series' slope would pass -4 standard errors by chance with a
-//! probability of 0.0036 (Student's t) per flight judged; fewer usable points (bounds missing)
-//! make it likelier (0.008 at 5).
+//! **Alarm** at a flight `k`, from the last [`HistoryRule::window`] flights up to it (fewer at
+//! the start of a series, from 4 usable flights on): the slope is negative beyond Student's
+//! t quantile for the stated false-alarm probability at the fit's degrees of freedom
+//! (`b / se(b) < t_{n-2}(p)`, `p` = [`HistoryRule::false_alarm`]), and the line crosses
+//! [`HistoryRule::loss_gamma`] within [`HistoryRule::horizon`] flights after it. Were the
+//! flights' scatter about the line normal and their weights right, a healthy series would
+//! pass the slope test by chance with probability `p` at every flight judged, whatever the
+//! number of points (at 10 degrees of freedom and `p` = 0.001 the slope must pass -4.14
+//! standard errors; at 2, -22.3). The crossing test removes most of those chance passes
+//! again, for a healthy line seldom reaches the loss gain within the horizon.
 
 /// The rule's numbers.
 #[derive(Debug, Clone, Copy)]
@@ -27,8 +29,8 @@ pub struct HistoryRule {
     pub horizon: f64,
     /// Flights fitted (the last ones up to the flight judged); at least 4.
     pub window: usize,
-    /// Standard errors below zero the slope must be.
-    pub t_alarm: f64,
+    /// Probability that a healthy series' slope passes the test by chance, per flight judged.
+    pub false_alarm: f64,
 }
 
 impl Default for HistoryRule {
@@ -36,8 +38,8 @@ impl Default for HistoryRule {
         Self {
             loss_gamma: 0.8,
             horizon: 10.0,
-            window: 8,
-            t_alarm: 4.0,
+            window: 12,
+            false_alarm: 0.001,
         }
     }
 }
@@ -58,6 +60,8 @@ pub struct Trend {
     pub slope: f64,
     pub slope_se: f64,
     pub crossing: Option<f64>,
+    /// The usable points fitted.
+    pub points: usize,
 }
 
 /// The weighted line through `points[first..=last]`, or `None` with under 4 usable points.
@@ -98,17 +102,25 @@ pub fn fit(points: &[Point], first: usize, last: usize, loss_gamma: f64) -> Opti
         slope,
         slope_se,
         crossing,
+        points: usable.len(),
     })
 }
 
+/// The t quantile below which the slope alarms: `t_{dof}(p)`, negative.
+pub fn slope_threshold(dof: usize, false_alarm: f64) -> f64 {
+    use statrs::distribution::{ContinuousCDF, StudentsT};
+    StudentsT::new(0.0, 1.0, dof as f64).map_or(f64::NEG_INFINITY, |t| t.inverse_cdf(false_alarm))
+}
+
 /// The first flight (index) at which the rule alarms, judging each flight from the ones up to
-/// it, with that flight's trend.
+/// it (the last `window`, from 4 usable on), with that flight's trend.
 pub fn first_alarm(points: &[Point], rule: &HistoryRule) -> Option<(usize, Trend)> {
     let window = rule.window.max(4);
-    (window - 1..points.len()).find_map(|k| {
-        let first = k + 1 - window;
+    (3..points.len()).find_map(|k| {
+        let first = (k + 1).saturating_sub(window);
         let t = fit(points, first, k, rule.loss_gamma)?;
-        let falling = t.slope < 0.0 && t.slope < -rule.t_alarm * t.slope_se;
+        let limit = slope_threshold(t.points - 2, rule.false_alarm);
+        let falling = t.slope < 0.0 && t.slope < limit * t.slope_se;
         let soon = t.crossing.is_some_and(|c| c - k as f64 <= rule.horizon);
         (falling && soon).then_some((k, t))
     })
@@ -259,10 +271,12 @@ mod tests {
         let falling: Vec<f64> = (0..12)
             .map(|k| 1.0 - 0.02 * k as f64 + scatter[k])
             .collect();
-        // Judged from the window's last flight on, and alarmed there, before the loss.
+        // Judged from the fourth flight on, alarmed once the slope passes its threshold and
+        // the loss is within the horizon, before the loss.
         let (k, t) = first_alarm(&points(&falling), &rule).unwrap();
-        assert_eq!(k, rule.window - 1);
+        assert!((3..9).contains(&k), "{k} {t:?}");
         assert!(t.crossing.unwrap() > k as f64, "{t:?}");
+        assert!(t.slope < slope_threshold(t.points - 2, rule.false_alarm) * t.slope_se);
         let flat: Vec<f64> = scatter.iter().map(|s| 1.0 + s).collect();
         assert_eq!(first_alarm(&points(&flat), &rule), None);
     }
@@ -287,5 +301,20 @@ mod tests {
         order(&mut flights);
         let names: Vec<&str> = flights.iter().map(|f| f.file.as_str()).collect();
         assert_eq!(names, ["z.tlog", "b.tlog", "0.ulg", "a.bin"]);
+    }
+
+    /// The threshold is Student's t quantile: the textbook values at p = 0.001.
+    #[test]
+    fn the_slope_threshold_is_student_s_quantile() {
+        for (dof, t) in [
+            (2, -22.327),
+            (4, -7.173),
+            (6, -5.208),
+            (10, -4.144),
+            (30, -3.385),
+        ] {
+            let got = slope_threshold(dof, 0.001);
+            assert!((got - t).abs() < 2e-3, "dof {dof}: {got} against {t}");
+        }
     }
 }

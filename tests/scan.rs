@@ -358,4 +358,14 @@ fn the_parquet_table_is_the_rows_in_the_documented_schema() {
     assert_ne!(code, 0);
     assert!(err.contains("cannot write"), "{err}");
     assert_eq!(std::fs::read(&jsonl).unwrap(), before);
+    // Both on standard output is refused before anything runs.
+    let (code, _, err) = ahcmon(&[
+        "scan",
+        tlogs().to_str().unwrap(),
+        "--rows",
+        "-",
+        "--parquet",
+        "-",
+    ]);
+    assert_eq!(code, 2, "{err}");
 }

@@ -81,14 +81,14 @@ fn replay<'py>(
 /// of series, one per airframe × actuator, as `ahcmon history --json` writes them (flights
 /// in start-time order, the trend over the last `window`, the first alarm's flight).
 #[pyfunction]
-#[pyo3(signature = (rows, loss_gamma=0.8, horizon=10.0, window=8, t_alarm=4.0))]
+#[pyo3(signature = (rows, loss_gamma=0.8, horizon=10.0, window=12, false_alarm=0.001))]
 fn history<'py>(
     py: Python<'py>,
     rows: &Bound<'py, PyAny>,
     loss_gamma: f64,
     horizon: f64,
     window: usize,
-    t_alarm: f64,
+    false_alarm: f64,
 ) -> PyResult<Bound<'py, PyAny>> {
     let check = |name: &str, x: f64, lo: f64, hi: f64| {
         if x.is_finite() && (lo..=hi).contains(&x) {
@@ -103,7 +103,7 @@ fn history<'py>(
         loss_gamma: check("loss_gamma", loss_gamma, 0.0, 2.0)?,
         horizon: check("horizon", horizon, 0.0, 1e6)?,
         window: check("window", window as f64, 4.0, 1000.0)? as usize,
-        t_alarm: check("t_alarm", t_alarm, 0.0, 100.0)?,
+        false_alarm: check("false_alarm", false_alarm, 1e-9, 0.5)?,
     };
     let rows = match to_json(py, rows)? {
         serde_json::Value::Array(rows) => rows,

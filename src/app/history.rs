@@ -14,7 +14,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
         loss_gamma,
         horizon,
         window,
-        t_alarm,
+        false_alarm,
         json: json_out,
         plot,
     } = a;
@@ -26,7 +26,7 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
         loss_gamma: in_range("--loss-gamma", loss_gamma, 0.0, 2.0)?,
         horizon: in_range("--horizon", horizon, 0.0, 1e6)?,
         window: usize::from(window),
-        t_alarm: in_range("--t-alarm", t_alarm, 0.0, 100.0)?,
+        false_alarm: in_range("--false-alarm", false_alarm, 1e-9, 0.5)?,
     };
     let text = std::fs::read_to_string(&rows).map_err(|source| InputFileError {
         path: rows.display().to_string(),
@@ -55,14 +55,14 @@ pub fn run(a: HistoryArgs) -> anyhow::Result<()> {
         .into());
     }
     outln!(
-        "{:<12} {:<9} {:>7} {:>7} {:>16} {:>9}  alarm (rule: slope < -{} se and gamma {} within {} flights, over the last {})",
+        "{:<12} {:<9} {:>7} {:>7} {:>16} {:>9}  alarm (rule: slope below Student's t at p {} and gamma {} within {} flights, over the last {})",
         "airframe",
         "actuator",
         "flights",
         "gamma",
         "slope/flight",
         "reaches",
-        rule.t_alarm,
+        rule.false_alarm,
         rule.loss_gamma,
         rule.horizon,
         rule.window

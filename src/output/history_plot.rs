@@ -57,10 +57,10 @@ pub fn render(series: &[Series], rule: &HistoryRule, title: &str) -> String {
     let alarms = series.iter().filter(|s| s.alarm.is_some()).count();
     let _ = write!(
         out,
-        r##"<text x="12" y="20" font-size="14">{}</text><text x="12" y="40" fill="#444">{} series, {alarms} with an alarm (slope below -{} se and gamma {} within {} flights, over the last {}){}. Bars: median bounds; blue: the fitted line; dashed: the loss gain.</text>"##,
+        r##"<text x="12" y="20" font-size="14">{}</text><text x="12" y="40" fill="#444">{} series, {alarms} with an alarm (slope below Student's t at p {} and gamma {} within {} flights, over the last {}){}. Bars: median bounds; blue: the fitted line; dashed: the loss gain.</text>"##,
         esc(title),
         series.len(),
-        rule.t_alarm,
+        rule.false_alarm,
         rule.loss_gamma,
         rule.horizon,
         rule.window,
