@@ -147,15 +147,13 @@ pub fn run(a: ScanArgs) -> anyhow::Result<()> {
             file.write_all(b"\n")?;
         }
     }
-    if let (Some(out), Some(table)) = (&mut parquet_file, &table) {
-        out.write_all(table)
-            .and_then(|()| out.flush())
-            .with_context(|| {
-                format!(
-                    "cannot write {}",
-                    parquet.as_deref().unwrap_or(Path::new("-")).display()
-                )
-            })?;
+    // The table replaces the file atomically (`write_whole`): the handle opened at the start
+    // only proved the path writable, and is closed first (a file it created and left empty
+    // goes with it).
+    drop(parquet_file.take());
+    if let (Some(out), Some(table)) = (&parquet, &table) {
+        ahcmon::output::file::write_whole(out, table)
+            .with_context(|| format!("cannot write {}", out.display()))?;
     }
     failed.extend(
         unreadable

@@ -41,15 +41,46 @@ pub fn for_people() -> Box<dyn Write> {
     }
 }
 
-/// A whole output written at once (a plot, a profile, a JSON document): to the file, which is
-/// replaced, or to standard output for `-`.
+/// A whole output written at once (a plot, a profile, a JSON document, a table): to standard
+/// output for `-`, else the file is replaced atomically: the bytes go to a new file beside it,
+/// which is renamed over it once they are all written, so a failed write (a full disk) leaves
+/// the file as it was and no reader sees half of it. The new file takes the old one's
+/// permissions. What is not a regular file or a missing one (a device such as `/dev/null`, a
+/// pipe, a symbolic link) is written in place, since renaming would replace it.
 pub fn write_whole(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     if is_stdout(path) {
         let mut out = std::io::stdout().lock();
-        reader_gone(out.write_all(bytes).and_then(|()| out.flush()))
-    } else {
-        std::fs::write(path, bytes)
+        return reader_gone(out.write_all(bytes).and_then(|()| out.flush()));
     }
+    let old = match std::fs::symlink_metadata(path) {
+        Ok(m) if !m.is_file() => return std::fs::write(path, bytes),
+        Ok(m) => Some(m.permissions()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(e),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"))?;
+    let mut temp_name = std::ffi::OsString::from(".");
+    temp_name.push(name);
+    temp_name.push(format!(".{}.partial", std::process::id()));
+    let temp = path.with_file_name(temp_name);
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&temp)?;
+    let written = (|| {
+        file.write_all(bytes)?;
+        if let Some(permissions) = old {
+            file.set_permissions(permissions)?;
+        }
+        file.sync_all()?;
+        std::fs::rename(&temp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&temp);
+    }
+    written
 }
 
 /// Standard output's reader may stop reading (`| head`): what it did not want is not an
@@ -161,5 +192,71 @@ impl Write for OutputFile {
             },
             Target::Stdout(None) => Ok(()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::write_whole;
+    use std::os::unix::fs::PermissionsExt;
+
+    fn dir() -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!(
+            "ahcmon-write-whole-{}-{:?}",
+            std::process::id(),
+            std::thread::current().id()
+        ));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn entries(d: &std::path::Path) -> Vec<String> {
+        let mut names: Vec<String> = (std::fs::read_dir(d).unwrap())
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_whole_output_replaces_the_file_keeping_its_permissions_and_leaves_nothing_beside() {
+        let d = dir();
+        let path = d.join("plot.svg");
+        write_whole(&path, b"first").unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_whole(&path, b"second, longer").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"second, longer");
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o640);
+        assert_eq!(entries(&d), ["plot.svg"]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_write_that_fails_leaves_the_old_file_as_it_was() {
+        let d = dir();
+        let path = d.join("rows.parquet");
+        std::fs::write(&path, b"yesterday").unwrap();
+        // The new file's name taken by a directory: the write fails before the rename.
+        let temp = d.join(format!(".rows.parquet.{}.partial", std::process::id()));
+        std::fs::create_dir(&temp).unwrap();
+        assert!(write_whole(&path, b"today").is_err());
+        assert_eq!(std::fs::read(&path).unwrap(), b"yesterday");
+        assert!(temp.is_dir(), "what was not the write's own is left alone");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_device_is_written_in_place_not_replaced() {
+        let null = std::path::Path::new("/dev/null");
+        write_whole(null, b"nothing").unwrap();
+        use std::os::unix::fs::FileTypeExt;
+        assert!(
+            std::fs::metadata(null)
+                .unwrap()
+                .file_type()
+                .is_char_device()
+        );
     }
 }
