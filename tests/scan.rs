@@ -270,6 +270,33 @@ fn the_external_archive_with_a_bad_file_is_scanned_whole() {
             );
         }
     }
+    // A ULog's board id is its sys_uuid as pyulog reads it.
+    let mut ulogs = 0;
+    for log in logs
+        .iter()
+        .filter(|l| l.extension().is_some_and(|x| x == "ulg"))
+    {
+        let uuid = common::run_python(&[
+            "-c",
+            "import sys; from pyulog import ULog; print(ULog(sys.argv[1], [], False).msg_info_dict.get('sys_uuid', ''))",
+            log.to_str().unwrap(),
+        ]);
+        let uuid = uuid.trim();
+        let expected = (!uuid.is_empty()).then(|| format!("px4 {}", uuid.to_ascii_uppercase()));
+        for r in rows
+            .iter()
+            .filter(|r| std::path::Path::new(r["file"].as_str().unwrap()) == log)
+        {
+            assert_eq!(
+                r["board_uid"].as_str(),
+                expected.as_deref(),
+                "{}",
+                log.display()
+            );
+        }
+        ulogs += usize::from(expected.is_some());
+    }
+    assert!(ulogs > 0, "no ULog with a sys_uuid");
 }
 
 /// `--parquet` beside `--rows`: pyarrow and pandas read the table, every value equals the JSON

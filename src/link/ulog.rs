@@ -247,6 +247,12 @@ pub fn read(path: &std::path::Path, emit: &mut dyn FnMut(&Record)) -> Result<Log
                         emit(&Record::Text(s.logged_message.to_string()));
                     }
                     Message::DropoutMessage(drop) => report.note_dropout(drop.duration_ms),
+                    Message::InfoMessage(info) if info.key == "sys_uuid" => {
+                        let text = std::str::from_utf8(info.value).unwrap_or_default();
+                        if let Some(id) = crate::telemetry::identity::from_px4_uuid(text) {
+                            emit(&Record::Board(id));
+                        }
+                    }
                     _ => {}
                 }
             }));

@@ -10,6 +10,10 @@
 //!   with anything past its 12th byte is no MCU id (ArduPilot's SITL puts the host's machine
 //!   id there as text, the same for every simulated vehicle on a host) and gives none. A
 //!   non-zero `uid` (64 bits, PX4) gives `uid XXXXXXXXXXXXXXXX`.
+//! - A PX4 ULog's `sys_uuid` information message: the board's GUID as hex text
+//!   (`board_get_px4_guid_formated`), read as `px4 ` and the hex digits in upper case. How it
+//!   relates to the `uid` PX4 sends in AUTOPILOT_VERSION is not checked here, so a board seen
+//!   both in a tlog and in a ULog may carry two ids (an airframes file maps both).
 
 /// AUTOPILOT_VERSION's ids as text; `None` when neither is a board's id.
 pub fn from_autopilot_version(uid: u64, uid2: &[u8]) -> Option<String> {
@@ -25,6 +29,16 @@ pub fn from_autopilot_version(uid: u64, uid2: &[u8]) -> Option<String> {
         .map(|w| format!("{:02X}{:02X}{:02X}{:02X}", w[3], w[2], w[1], w[0]))
         .collect();
     Some(format!("mcu {}", words.join(" ")))
+}
+
+/// A ULog's `sys_uuid` (hex text, trailing NULs allowed); `None` unless it is 8 to 64 hex
+/// digits, not all zero.
+pub fn from_px4_uuid(text: &str) -> Option<String> {
+    let hex = text.trim_end_matches('\0').trim();
+    let is_id = (8..=64).contains(&hex.len())
+        && hex.chars().all(|c| c.is_ascii_hexdigit())
+        && hex.chars().any(|c| c != '0');
+    is_id.then(|| format!("px4 {}", hex.to_ascii_uppercase()))
 }
 
 /// The board id in ArduPilot's boot banner: a name then exactly three 8-digit hex words.
@@ -77,6 +91,17 @@ mod tests {
             from_autopilot_version(0, &uid2),
             from_banner("CUAVv5Nano 001A002F 30395113 33333539")
         );
+    }
+
+    #[test]
+    fn a_ulog_s_uuid_is_its_hex_digits() {
+        assert_eq!(
+            from_px4_uuid("00020000000020373658375650100020002d\0").as_deref(),
+            Some("px4 00020000000020373658375650100020002D")
+        );
+        assert_eq!(from_px4_uuid("0000000000000000"), None);
+        assert_eq!(from_px4_uuid("not hex at all"), None);
+        assert_eq!(from_px4_uuid("1234"), None);
     }
 
     #[test]

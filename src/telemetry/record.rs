@@ -38,4 +38,7 @@ pub enum Record {
     /// Height above home (m).
     RelAlt(f64),
     Text(String),
+    /// The autopilot board's id, as a log's header states it (a ULog's `sys_uuid`), in the
+    /// form of [`crate::telemetry::identity`].
+    Board(String),
 }

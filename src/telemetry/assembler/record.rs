@@ -42,6 +42,12 @@ impl VehicleAssembler {
                 self.note_text(text);
                 None
             }
+            Record::Board(id) => {
+                if self.info.board_uid.is_none() {
+                    self.info.board_uid = Some(id.clone());
+                }
+                None
+            }
             Record::RelAlt(h) => {
                 if h.is_finite() {
                     self.rel_alt = Some(*h);
