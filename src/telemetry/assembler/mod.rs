@@ -275,16 +275,6 @@ impl VehicleAssembler {
         }
     }
 
-    /// A text the vehicle sent or logged: kept (the first 1000), and its board id read.
-    fn note_text(&mut self, text: &str) {
-        if self.info.statustext.len() < 1000 {
-            self.info.statustext.push(text.to_string());
-        }
-        if self.info.board_uid.is_none() {
-            self.info.board_uid = identity::from_banner(text);
-        }
-    }
-
     fn is_autopilot_component(&self, compid: u8) -> bool {
         match self.info.compid {
             Some(c) => c == compid,

@@ -87,4 +87,15 @@ impl VehicleAssembler {
             }
         }
     }
+
+    /// A text the vehicle sent (STATUSTEXT) or logged: kept (the first 1000), and its board id
+    /// read.
+    pub(super) fn note_text(&mut self, text: &str) {
+        if self.info.statustext.len() < 1000 {
+            self.info.statustext.push(text.to_string());
+        }
+        if self.info.board_uid.is_none() {
+            self.info.board_uid = crate::telemetry::identity::from_banner(text);
+        }
+    }
 }
