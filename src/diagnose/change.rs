@@ -81,6 +81,14 @@ pub struct Reading {
     pub ramp_since: f64,
 }
 
+/// A ring index `i < 2 cap` brought into `0..cap` (the store's loops index it once a sample,
+/// and a subtraction is a fraction of the cost of `%`).
+#[inline]
+pub(super) fn wrap(i: usize, cap: usize) -> usize {
+    debug_assert!(i < 2 * cap);
+    if i >= cap { i - cap } else { i }
+}
+
 /// The kinds of change in the order the searches index them.
 const KINDS: [ChangeKind; 3] = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind::Stuck];
 
@@ -88,36 +96,40 @@ const KINDS: [ChangeKind; 3] = [ChangeKind::Gain, ChangeKind::Offset, ChangeKind
 /// sum of squares, mean command, sum of squares of its regressor).
 type Fit = (f64, usize, f64, f64, f64, f64);
 
-/// The drops and values of a gain, an offset and a stuck output (in [`KINDS`] order), and of
-/// a gain and an offset together, from `Σ g y`, `Σ g²`, `Σ o y`, `Σ o²`, `Σ g o` over a
-/// changed stretch (`g` the gain regressor `b u`, `o` the offset regressor `b`, `y` the
-/// residual); `None` where a regressor is zero or the pair is degenerate.
-#[allow(clippy::type_complexity)]
-fn kind_drops(
-    gy: f64,
-    gx: f64,
-    oy: f64,
-    ox: f64,
-    go: f64,
-) -> ([(Option<f64>, Option<f64>); 3], Option<f64>) {
+/// The drops of a gain, an offset and a stuck output (in [`KINDS`] order), and of a gain and
+/// an offset together, from `Σ g y`, `Σ g²`, `Σ o y`, `Σ o²`, `Σ g o` over a changed stretch
+/// (`g` the gain regressor `b u`, `o` the offset regressor `b`, `y` the residual); `None`
+/// where a regressor is zero or the pair is degenerate. Their values: [`kind_value`].
+fn kind_drops(gy: f64, gx: f64, oy: f64, ox: f64, go: f64) -> ([Option<f64>; 3], Option<f64>) {
     // Gain and offset together: the 2×2 normal equations.
     let det = gx * ox - go * go;
     let pair = (det > 1e-9 * gx * ox).then(|| {
         let (a, d) = ((gy * ox - go * oy) / det, (gx * oy - go * gy) / det);
         a * gy + d * oy
     });
-    let mut fits = [(None, None); 3];
+    let mut drops = [None; 3];
     if gx > 0.0 {
-        fits[0] = (Some(gy * gy / gx), Some(1.0 + gy / gx));
+        drops[0] = Some(gy * gy / gx);
     }
     if ox > 0.0 {
-        fits[1] = (Some(oy * oy / ox), Some(oy / ox));
+        drops[1] = Some(oy * oy / ox);
         // Stuck at θ: r = b (θ - u); the sum of squares left is Σ(r + b u)² - (Σ b(r + b u))²/Σb²,
         // and Σ(r + b u)² = Σ r² + 2 gy + gx.
         let sy = oy + go;
-        fits[2] = (Some(sy * sy / ox - 2.0 * gy - gx), Some(sy / ox));
+        drops[2] = Some(sy * sy / ox - 2.0 * gy - gx);
     }
-    (fits, pair)
+    (drops, pair)
+}
+
+/// The fitted value θ of kind `k` (in [`KINDS`] order) whose drop [`kind_drops`] gave: the
+/// gain, the offset, the stuck output. Computed only for a fit that is kept (the search
+/// compares drops over every stretch, and most are not).
+fn kind_value(k: usize, gy: f64, gx: f64, oy: f64, ox: f64, go: f64) -> f64 {
+    match k {
+        0 => 1.0 + gy / gx,
+        1 => oy / ox,
+        _ => (oy + go) / ox,
+    }
 }
 
 /// Keep in `row`, per kind, the best of this stretch's fits from `sums` (see [`kind_drops`]),
@@ -129,17 +141,17 @@ fn keep_best(
     fit: impl Fn(f64, f64, f64) -> Fit,
 ) {
     let [gy, gx, oy, ox, go] = sums;
-    let (fits, pair) = kind_drops(gy, gx, oy, ox, go);
+    let (drops, pair) = kind_drops(gy, gx, oy, ox, go);
     if let Some(drop) = pair.filter(|d| d.is_finite() && *d > *pair_best) {
         *pair_best = drop;
     }
     // A stuck output's regressor is the offset's (see `kind_drops`).
-    for ((slot, (drop, theta)), ss) in row.iter_mut().zip(fits).zip([gx, ox, ox]) {
-        if let (Some(drop), Some(theta)) = (drop, theta)
+    for (k, ((slot, drop), ss)) in row.iter_mut().zip(drops).zip([gx, ox, ox]).enumerate() {
+        if let Some(drop) = drop
             && drop.is_finite()
             && drop > slot.0
         {
-            *slot = fit(drop, theta, ss);
+            *slot = fit(drop, kind_value(k, gy, gx, oy, ox, go), ss);
         }
     }
 }
@@ -381,7 +393,7 @@ impl ChangeTest {
         let cap = self.buf.len();
         let n = samples.min(self.len).max(1);
         let ss: f64 = (1..=n)
-            .map(|k| self.buf[(self.head + cap - k) % cap].u[j].powi(2))
+            .map(|k| self.buf[wrap(self.head + cap - k, cap)].u[j].powi(2))
             .sum();
         (ss / n as f64).sqrt()
     }
@@ -409,7 +421,7 @@ impl ChangeTest {
                 (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
             let mut su = 0.0;
             for n in 1..=self.len {
-                let e = &self.buf[(self.head + cap - n) % cap];
+                let e = &self.buf[wrap(self.head + cap - n, cap)];
                 let u = e.u[j];
                 su += u;
                 for (&bi, &ri) in b.iter().zip(&e.r).take(self.rows) {
@@ -482,7 +494,7 @@ impl ChangeTest {
         let (mut lag, mut sq) = (0.0, 0.0);
         let mut newer: Option<[f64; 4]> = None;
         for n in 1..=h.1 {
-            let e = &self.buf[(self.head + cap - n) % cap];
+            let e = &self.buf[wrap(self.head + cap - n, cap)];
             let mut x = [0.0; 4];
             for (i, xi) in x.iter_mut().enumerate().take(self.rows) {
                 *xi = fitted(e, i);

@@ -44,13 +44,13 @@ impl ChangeTest {
         }
         let mut hu_run = [[0.0f64; 4]; MAX_ACTUATORS];
         let mut h1_run = [0.0f64; 4];
+        let mut settled = [None; 4];
         for k in 0..n {
-            let e = &self.buf[(oldest + k) % cap];
+            let e = &self.buf[wrap(oldest + k, cap)];
             let x = &mut self.scratch[k];
             for (i, &(_, theta, c, alpha)) in filt.iter().enumerate().take(rows) {
                 let wi = &w[i];
-                let (gain, scale, next) = wi.advance(spread[i]);
-                spread[i] = next;
+                let (gain, scale) = wi.advance_settling(&mut spread[i], &mut settled[i]);
                 x.y[i] = wi.apply(&mut predicted[i], e.r[i], gain, scale);
                 x.f1[i] = c + alpha * h1_run[i];
                 x.h1[i] = h1_run[i];
@@ -83,7 +83,7 @@ impl ChangeTest {
         for tau in (0..n).rev() {
             let m = n - tau;
             let x = &self.scratch[tau];
-            let e = &self.buf[(oldest + tau) % cap];
+            let e = &self.buf[wrap(oldest + tau, cap)];
             for (sj, uj) in su.iter_mut().zip(&e.u).take(l) {
                 *sj += uj;
             }
@@ -226,6 +226,26 @@ impl Whiten {
         )
     }
 
+    /// [`Whiten::advance`] from the prediction variance `p`, which it moves on, until the
+    /// recursion reaches its fixed point (the next variance equal to this one, bit for bit):
+    /// from then on every sample's gain and scale are the same, kept in `settled` and not
+    /// computed again (the same numbers, without a square root and two divisions a sample).
+    pub(super) fn advance_settling(
+        &self,
+        p: &mut f64,
+        settled: &mut Option<(f64, f64)>,
+    ) -> (f64, f64) {
+        if let Some(gain_scale) = *settled {
+            return gain_scale;
+        }
+        let (gain, scale, next) = self.advance(*p);
+        if next.to_bits() == p.to_bits() {
+            *settled = Some((gain, scale));
+        }
+        *p = next;
+        (gain, scale)
+    }
+
     /// One series' sample `x` through the filter with this sample's `gain` and `scale` (from
     /// [`Whiten::advance`]): its whitened value, and `predicted` carried to the next sample.
     pub(super) fn apply(&self, predicted: &mut f64, x: f64, gain: f64, scale: f64) -> f64 {
@@ -344,7 +364,7 @@ impl ChangeTest {
         // Oldest first: the residual's filter runs over the whole store (its state at the
         // stretch's start is the healthy past's), each regressor's from zero at the stretch's
         // start (zero before it), all with the same gains; the sums over the stretch.
-        let entry = |k: usize| &self.buf[(self.head + cap - self.len + k) % cap];
+        let entry = |k: usize| &self.buf[wrap(self.head + cap - self.len + k, cap)];
         let start = self.len - n;
         let (mut pr, mut pg, mut po) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
         let mut pv = [0.0f64; 4];
@@ -353,6 +373,7 @@ impl ChangeTest {
         }
         let (mut gy, mut gx, mut oy, mut ox, mut base) = (0.0, 0.0, 0.0, 0.0, 0.0);
         let (mut go, mut su) = (0.0, 0.0);
+        let mut settled = [None; 4];
         for k in 0..self.len {
             let e = entry(k);
             let inside = k >= start;
@@ -361,8 +382,7 @@ impl ChangeTest {
                 su += u;
             }
             for (i, wi) in w.iter().enumerate().take(rows) {
-                let (gain, scale, next) = wi.advance(pv[i]);
-                pv[i] = next;
+                let (gain, scale) = wi.advance_settling(&mut pv[i], &mut settled[i]);
                 let y = wi.apply(&mut pr[i], e.r[i], gain, scale);
                 if !inside {
                     continue;

@@ -12,6 +12,17 @@ pub struct Polygon<const V: usize> {
     n: usize,
 }
 
+/// The vertex after `k` and the one before it, of `n` (`%` costs a division each).
+#[inline]
+fn next(k: usize, n: usize) -> usize {
+    if k + 1 >= n { 0 } else { k + 1 }
+}
+
+#[inline]
+fn prev(k: usize, n: usize) -> usize {
+    if k == 0 { n - 1 } else { k - 1 }
+}
+
 fn cross(o: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 }
@@ -83,7 +94,7 @@ impl<const V: usize> Polygon<V> {
         let mut out = [[0.0; 2]; V];
         let mut m = 0;
         for k in 0..self.n {
-            let (p, q) = (self.v[k], self.v[(k + 1) % self.n]);
+            let (p, q) = (self.v[k], self.v[next(k, self.n)]);
             let (sp, sq) = (side(&p), side(&q));
             if sp <= 0.0 {
                 out[m] = p;
@@ -115,8 +126,8 @@ impl<const V: usize> Polygon<V> {
         let mut out = [[0.0; 2]; V];
         let mut m = 0;
         for k in 0..n {
-            let prev = self.v[(k + n - 1) % n];
-            let (p, next) = (self.v[k], self.v[(k + 1) % n]);
+            let prev = self.v[prev(k, n)];
+            let (p, next) = (self.v[k], self.v[next(k, n)]);
             let (from, to) = (quadrant(normal(prev, p)), quadrant(normal(p, next)));
             // Corners from the incoming edge's quadrant to the outgoing one's, turning
             // counter-clockwise (a convex polygon's normals turn that way).
@@ -147,7 +158,7 @@ impl<const V: usize> Polygon<V> {
         let mut k = 0;
         while self.n > 3 && k < self.n {
             let n = self.n;
-            let (a, b, c) = (self.v[(k + n - 1) % n], self.v[k], self.v[(k + 1) % n]);
+            let (a, b, c) = (self.v[prev(k, n)], self.v[k], self.v[next(k, n)]);
             let close = (a[0] - b[0]).abs() < eps && (a[1] - b[1]).abs() < eps;
             if close || cross(a, b, c).abs() < eps * eps {
                 self.v.copy_within(k + 1..n, k);
@@ -166,8 +177,8 @@ impl<const V: usize> Polygon<V> {
             let n = self.n;
             let mut best: Option<(f64, usize, [f64; 2])> = None;
             for k in 0..n {
-                let (a, b) = (self.v[(k + n - 1) % n], self.v[k]);
-                let (c, d) = (self.v[(k + 1) % n], self.v[(k + 2) % n]);
+                let (a, b) = (self.v[prev(k, n)], self.v[k]);
+                let (c, d) = (self.v[next(k, n)], self.v[next(next(k, n), n)]);
                 // The neighbours' lines must meet beyond the edge b-c (their turns sum below π).
                 let Some(w) = meet(a, b, c, d) else { continue };
                 let beyond_b = (w[0] - b[0]) * (b[0] - a[0]) + (w[1] - b[1]) * (b[1] - a[1]);
@@ -182,7 +193,7 @@ impl<const V: usize> Polygon<V> {
             }
             let Some((_, k, w)) = best else { return };
             // Replace b (k) and c (k + 1) by w.
-            let c = (k + 1) % n;
+            let c = next(k, n);
             self.v[k] = w;
             if c == 0 {
                 self.v.copy_within(1..n, 0);
