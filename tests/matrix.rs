@@ -103,3 +103,23 @@ fn healthy_flights_in_stronger_gusts_keep_the_thresholds_false_alarm_rate() {
         assert!(factor > 1.1, "seed {seed}: {line}");
     }
 }
+
+/// Rule T1 over the flight: this rough flight's calibration stretch came in a lull and read the
+/// gusts at x1.0 (no raise), and with the calibration's reading alone the elevator got an F1
+/// fault decision at 367 s. The gusts measured again on the stretches after it raise the
+/// threshold within the first minutes, and the flight has no fault decision.
+#[test]
+fn a_rough_flight_read_calm_at_its_calibration_is_raised_in_flight() {
+    use ahcmon::eval::matrix::{Case, Flight, Weather, run_case};
+    let case = Case {
+        vehicle: "plane",
+        fault: None,
+        flight: Flight::Steady,
+        weather: Weather::Rough,
+        seed: 14,
+        duration_s: 600.0,
+    };
+    let r = run_case(&case).unwrap();
+    assert!(r.estimating_h > 0.15, "{r:?}");
+    assert_eq!(r.false_decisions, Vec::<(String, String)>::new());
+}

@@ -12,6 +12,7 @@ mod calibrating;
 mod commands;
 mod fitting;
 mod gate;
+mod gusts;
 mod holes;
 mod running;
 mod set_bounds;

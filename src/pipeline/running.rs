@@ -4,6 +4,7 @@
 //! are assembled here.
 
 use super::calibrating::StoredSample;
+use super::gusts::GustWatch;
 use super::step::{Core, StepInput};
 use super::{Stage, VehiclePipeline};
 use crate::diagnose::decision::Decision;
@@ -45,6 +46,8 @@ pub(super) struct Running {
     pub(super) rates_prev: [[f64; 3]; 2],
     pub(super) exogenous: bool,
     pub(super) last_t: f64,
+    /// Rule T1 over the flight (where it applies): the gusts measured on every further stretch.
+    pub(super) gusts: Option<GustWatch>,
 }
 
 impl Running {
@@ -202,6 +205,25 @@ impl VehiclePipeline {
             residual_from: (!gap && own_inputs).then_some(&rates_before),
         };
         r.core.step(&step, &mut self.counters, sink);
+        if let Some(g) = &mut r.gusts {
+            // Only measured samples after the calibration stretch (a catch-up runs over it).
+            if s.t > g.from_t
+                && let Some(factor) = g.push(s.t, s.rates, u, r.core.diag.fault_in_force())
+            {
+                r.core.diag.params.threshold = g.base_threshold * factor;
+                if g.worth_saying(factor) {
+                    sink.message(
+                        self.sysid,
+                        &format!(
+                            "gusts measured again in flight ({} stretches of {:.0} s, the calibration's included): x{factor:.2} those the thresholds were set on; the deviation threshold is now {:.3} (rule T1)",
+                            g.stretches(),
+                            g.stretch_s(),
+                            r.core.diag.params.threshold
+                        ),
+                    );
+                }
+            }
+        }
         for j in 0..r.l {
             self.active[j] = r.core.diag.active(j);
             self.health[j] = r.core.diag.health(j);
@@ -317,14 +339,24 @@ impl VehiclePipeline {
             ),
         }
         let mut diag = Diagnoser::new(self.cfg.diagnosis, self.sysid, calibrated, dt);
-        // Rule T1: the deviation threshold raised by the gusts this flight's calibration
-        // measured (said at the calibration); a profile used as identified has no fit, and none.
-        if let Some(factor) =
-            (self.fit.as_ref()).and_then(|f| calibrated.diagnosis.gust_factor(&f.gusts))
-        {
-            diag.params.threshold *= factor;
-        }
         let last = samples.last().map(|s| (s.t, s.u));
+        // Rule T1: the deviation threshold raised by the gusts this flight's calibration
+        // measured (said at the calibration), then by those measured again over the flight; a
+        // profile used as identified has no fit, and none.
+        let gusts = self.fit.as_ref().and_then(|f| {
+            GustWatch::new(
+                &calibrated.diagnosis,
+                calibrated.rate_params(),
+                &f.gusts,
+                diag.params.threshold,
+                samples.len(),
+                dt,
+                last.map_or(f64::NEG_INFINITY, |l| l.0),
+            )
+        });
+        if let Some(g) = &gusts {
+            diag.params.threshold *= g.factor;
+        }
         if !self.failing_axes.is_empty() {
             let t = last.map_or(0.0, |l| l.0);
             let mut said = vec![];
@@ -394,6 +426,7 @@ impl VehiclePipeline {
             rates_prev,
             exogenous,
             last_t: last.map_or(0.0, |l| l.0),
+            gusts,
         }));
         self.set_stage(stage, &why);
         true

@@ -18,9 +18,9 @@ mod pem;
 mod scaled;
 
 pub use arx::{ArxFit, calibrate_arx};
-use pem::{Row, WHITENESS_LIMIT, fit_axis};
+use pem::{MAX_EVALUATIONS, Row, WHITENESS_LIMIT, fit_axis_within};
 use scaled::fit_vertical;
-pub use scaled::{ScaledFit, calibrate_scaled};
+pub use scaled::{ScaledFit, calibrate_scaled, calibrate_scaled_within};
 
 #[derive(Debug, Error, PartialEq)]
 pub enum CalibrationError {

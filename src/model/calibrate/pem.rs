@@ -99,7 +99,7 @@ pub(super) struct PemFit {
     pub wind_std: f64,
     pub noise_std: f64,
     /// Ljung-Box statistic of the normalised innovations over lags 1 to [`WHITENESS_LAGS`]:
-    /// about χ² with that many degrees of freedom when the model holds (see [`fit_axis`]).
+    /// about χ² with that many degrees of freedom when the model holds (see [`fit_axis_within`]).
     pub whiteness: f64,
 }
 
@@ -161,12 +161,18 @@ const PHI_MAX: f64 = 0.9996;
 
 /// Likelihood evaluations of the search (each a pass over the rows); the search restarts once
 /// from its best point, as Nelder-Mead's simplex can collapse early.
-const MAX_EVALUATIONS: usize = 600;
+pub(super) const MAX_EVALUATIONS: usize = 600;
+
+/// [`fit_axis_within`] with the calibration's budget.
+#[cfg(test)]
+pub(super) fn fit_axis(rows: &[Row], a0: f64) -> Option<PemFit> {
+    fit_axis_within(rows, a0, MAX_EVALUATIONS)
+}
 
 /// Fit one axis from its rows, the search starting from the decay `a0` (a plain fit's or the
-/// profile's).
+/// profile's), each of its two runs stopped after `max_evaluations`.
 /// `None` when too few rows were measured or no starting point gives a finite likelihood.
-pub(super) fn fit_axis(rows: &[Row], a0: f64) -> Option<PemFit> {
+pub(super) fn fit_axis_within(rows: &[Row], a0: f64, max_evaluations: usize) -> Option<PemFit> {
     if rows.iter().filter(|r| r.link == Link::Next).count() < 20 {
         return None;
     }
@@ -174,8 +180,8 @@ pub(super) fn fit_axis(rows: &[Row], a0: f64) -> Option<PemFit> {
     let start = [a0.clamp(0.05, 0.999), 0.9, 0.0];
     let step = [0.02_f64.min(0.5 * (1.0 - start[0])), 0.05, 1.5];
     let cost = |p: &[f64; 3]| concentrated(rows, p).map_or(f64::INFINITY, |c| c.cost);
-    let (first, _) = nelder_mead(cost, start, step, MAX_EVALUATIONS);
-    let (best, value) = nelder_mead(cost, first, step.map(|s| 0.2 * s), MAX_EVALUATIONS);
+    let (first, _) = nelder_mead(cost, start, step, max_evaluations);
+    let (best, value) = nelder_mead(cost, first, step.map(|s| 0.2 * s), max_evaluations);
     if !value.is_finite() {
         return None;
     }

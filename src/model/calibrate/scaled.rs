@@ -32,6 +32,17 @@ pub fn calibrate_scaled(
     dt: f64,
     base: &RateParams,
 ) -> Result<ScaledFit, CalibrationError> {
+    calibrate_scaled_within(samples, dt, base, MAX_EVALUATIONS)
+}
+
+/// [`calibrate_scaled`] with the likelihood fit's search stopped after `max_evaluations` per
+/// run (of two): a cheaper, slightly less converged fit for a measurement repeated in flight.
+pub fn calibrate_scaled_within(
+    samples: &[CalibrationSample],
+    dt: f64,
+    base: &RateParams,
+    max_evaluations: usize,
+) -> Result<ScaledFit, CalibrationError> {
     let l = base.actuators();
     let need = 50;
     if samples.len() < need + 2 {
@@ -104,7 +115,10 @@ pub fn calibrate_scaled(
         let plain = instrumental(&x, &z, &y).and_then(physical);
         let a0 = plain.map_or((-base.damping[axis] * dt).exp(), |p| (-p.0 * dt).exp());
         let wind = plain
-            .and_then(|_| fit_axis(&Row::of(samples, axis, |u| drive(axis, u)), a0))
+            .and_then(|_| {
+                let rows = Row::of(samples, axis, |u| drive(axis, u));
+                fit_axis_within(&rows, a0, max_evaluations)
+            })
             .filter(|f| f.whiteness <= WHITENESS_LIMIT)
             .and_then(|f| {
                 let beta = DVector::from_column_slice(&[f.a, f.beta, f.c]);
