@@ -22,11 +22,11 @@ const SAY_STEP: f64 = 0.1;
 /// The likelihood search's evaluations per run in flight (the calibration's 600 converge to
 /// 1e-9; the level needs a per cent, and a stretch's own spread is about 12 %).
 const EVALUATIONS: usize = 150;
-/// Every stretch is measured until this many are pooled (10 minutes at 20 s: the level then
-/// known to about 2 %), then one in [`LATER_EVERY`], which follows a change of the weather at
-/// a fifth of the cost.
-const POOLED_FULLY: usize = 30;
-const LATER_EVERY: usize = 5;
+/// Every stretch is measured until this many are pooled (5 minutes at 20 s: the level then
+/// known to about 3 %), then one in [`LATER_EVERY`] (every 5 minutes at 20 s), which follows a
+/// change of the weather: a fit costs about what 5 s of the filters do.
+const POOLED_FULLY: usize = 15;
+const LATER_EVERY: usize = 15;
 
 pub(super) struct GustWatch {
     base: RateParams,
