@@ -141,17 +141,20 @@ impl GustWatch {
         // The outputs of sample k act until sample k+1 (as at the calibration); a pair that is
         // not one period apart starts a new run.
         let mut rows: Vec<CalibrationSample> = Vec::with_capacity(self.stretch.len());
+        // Each kept sample's position in periods: one after a kept predecessor, else as many
+        // as passed since the last kept one (so the wind's carry-over spans the hole).
         let mut follows = false;
-        let mut step = 0u64;
+        let mut last_kept: Option<(f64, u64)> = None;
         for pair in self.stretch.windows(2) {
             let interval = pair[1].t - pair[0].t;
             let regular = interval > 0.0 && interval <= 1.5 * self.dt;
             if regular {
-                step += if follows {
-                    1
-                } else {
-                    ((interval / self.dt).round() as u64).max(1) + 1
+                let step = match last_kept {
+                    None => 0,
+                    Some((_, step)) if follows => step + 1,
+                    Some((t, step)) => step + (((pair[1].t - t) / self.dt).round() as u64).max(1),
                 };
+                last_kept = Some((pair[1].t, step));
                 rows.push(CalibrationSample {
                     rates: pair[1].rates,
                     u: &pair[0].u[..self.actuators],

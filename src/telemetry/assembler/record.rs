@@ -99,3 +99,52 @@ impl VehicleAssembler {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::{AssemblerConfig, VehicleAssembler};
+    use crate::protocol::dialects::ahcmon::MavMessage;
+
+    fn feed(a: &mut VehicleAssembler, msgs: &[MavMessage]) {
+        let mut out = Vec::new();
+        for m in msgs {
+            a.on_message(1, m, &mut out);
+        }
+    }
+
+    #[test]
+    fn the_board_id_comes_from_autopilot_version_or_the_boot_banner_first_one_kept() {
+        use crate::protocol::dialects::ahcmon::{AUTOPILOT_VERSION_DATA, STATUSTEXT_DATA};
+        let text = |s: &str| {
+            let mut t = [0u8; 50];
+            t[..s.len()].copy_from_slice(s.as_bytes());
+            MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                text: t.into(),
+                ..Default::default()
+            })
+        };
+        let version = |uid: u64| {
+            MavMessage::AUTOPILOT_VERSION(AUTOPILOT_VERSION_DATA {
+                uid,
+                ..Default::default()
+            })
+        };
+        let mut a = VehicleAssembler::new(1, AssemblerConfig::default());
+        feed(&mut a, &[text("ArduCopter V4.5.7 (2a3dc4b7)"), version(0)]);
+        assert_eq!(a.info.board_uid, None, "SITL's zero uid is no id");
+        feed(
+            &mut a,
+            &[
+                text("CubeOrange 003A002D 3138510F 33393935"),
+                version(0xABCD),
+            ],
+        );
+        assert_eq!(
+            a.info.board_uid.as_deref(),
+            Some("mcu 003A002D 3138510F 33393935")
+        );
+        let mut b = VehicleAssembler::new(1, AssemblerConfig::default());
+        feed(&mut b, &[version(0xABCD)]);
+        assert_eq!(b.info.board_uid.as_deref(), Some("uid 000000000000ABCD"));
+    }
+}
