@@ -40,11 +40,22 @@ impl Diagnoser {
             }
         }
     }
+    /// Whether `r`'s gain change read as an offset of its actuator is of a fault's size: the
+    /// offset that matches `(γ - 1) u` over the stretch in the least-squares sense is
+    /// `(γ - 1)` times the command's mean there.
+    pub(super) fn offset_reading_of_fault_size(&self, r: &Reading) -> bool {
+        let p = &self.params;
+        let offset = ((r.value - 1.0) * r.command_mean).abs();
+        offset >= p.threshold && offset > p.bias_tau
+    }
+
     /// D2: the actuator the data alarm on: named clearly by the whitened search (its margin is
     /// honest about the wind's colour; the plain search's counts it only through the lag-one
     /// autocorrelation, and in 1.5 times the gusts read healthy surfaces clearly changed), on a
     /// change of at least `CLASS_MIN_S` that began with a second of the store before it, of a
-    /// fault's size ([`Self::is_fault_size`]).
+    /// fault's size ([`Self::is_fault_size`]), that a gain and an offset of the same actuator
+    /// changing together do not explain clearly better (by `DATA_MARGIN`): a fault of one kind
+    /// leaves the pair's second unknown little to add, the wind's shape does not.
     pub(super) fn data_alarm(&self) -> Option<usize> {
         let r = self.naming_reading()?;
         let before = (1.0 / self.dt).round() as usize;
@@ -52,8 +63,9 @@ impl Diagnoser {
         (self.reading_whitened
             && long
             && r.samples + before <= self.change.len()
-            && self.is_fault_size(&r))
-        .then_some(r.actuator)
+            && self.is_fault_size(&r)
+            && -r.margin_over(r.mixed_drop) < DATA_MARGIN)
+            .then_some(r.actuator)
     }
     /// C1: the class the data give actuator `j`: the reading is its, the stretch at least
     /// `CLASS_MIN_S`, one kind beats the others by `DATA_MARGIN` and the pair of gain and

@@ -73,20 +73,26 @@ impl Diagnoser {
         let alarms = self.actuators[j].alarms();
         // The data's best fit, of what is under way. An offset under the threshold
         // (`is_fault_size`) measures the change smaller than a fault: the wind imitates one up
-        // to that size. On this actuator it is no evidence for F1, and on any it restarts F2's
-        // wait: the data see no change of a fault's size, and the alarm is the filters'
-        // reading of the wind.
+        // to that size. A gain above one is no fault's kind (D2), unless the same change read
+        // as an offset is of a fault's size (a motor's offset up near a steady command is a gain
+        // above one too). On this actuator either is no evidence for F1, and on any it
+        // restarts F2's wait: the data see no fault, and the alarm is the filters' reading of
+        // the wind.
         let reading = self.reading.filter(|_| !self.reading_scanned);
-        let small = reading.filter(|r| r.kind == ChangeKind::Offset && !self.is_fault_size(r));
-        let measured_small = small.is_some_and(|r| r.actuator == j);
-        let best = reading.map(|r| r.actuator).filter(|_| !measured_small);
+        let no_fault = reading.filter(|r| match r.kind {
+            ChangeKind::Offset => !self.is_fault_size(r),
+            ChangeKind::Gain => r.value > 1.0 && !self.offset_reading_of_fault_size(r),
+            ChangeKind::Stuck => false,
+        });
+        let measured_no_fault = no_fault.is_some_and(|r| r.actuator == j);
+        let best = reading.map(|r| r.actuator).filter(|_| !measured_no_fault);
         // The data name another actuator clearly: this alarm is its evidence, even when that
         // actuator's fault is in force (the filters spread a fault over other actuators for as
         // long as it lasts; a second fault under it is listed in its `also`).
         let named_other = named.filter(|&k| k != j);
         if alarms == 0 {
             self.actuators[j].contradicted_at = f64::NEG_INFINITY;
-        } else if named_other.is_some() || small.is_some() {
+        } else if named_other.is_some() || no_fault.is_some() {
             self.actuators[j].contradicted_at = t;
         }
         let st = &self.actuators[j];

@@ -393,6 +393,25 @@ impl Diagnoser {
         (0..self.actuators.len()).any(|j| self.active(j).is_some())
     }
 
+    /// The earliest evidence of the faults in force: their decisions, their filters' alarms
+    /// and the data's estimate of when their change began (`None` with no fault in force).
+    pub fn fault_evidence_since(&self) -> Option<f64> {
+        let data = |j: usize| {
+            (self.reading)
+                .filter(|r| r.actuator == j)
+                .map_or(f64::INFINITY, |r| r.since)
+        };
+        (0..self.actuators.len())
+            .filter(|&j| self.active(j).is_some())
+            .map(|j| {
+                let a = &self.actuators[j];
+                (a.decided_at)
+                    .min(a.first_alarm().unwrap_or(f64::INFINITY))
+                    .min(data(j))
+            })
+            .min_by(f64::total_cmp)
+    }
+
     /// The reading when it names its actuator clearly against every other one.
     fn naming_reading(&self) -> Option<Reading> {
         self.reading

@@ -36,6 +36,17 @@ fn x1_a_decision_out_of_the_flight_envelope_is_marked_as_a_crash() {
 /// Plane, aileron commanded about 0.1 ± 0.08, its gain `gain` from 16 s, which the filters do
 /// not show at all (their estimates stay healthy, so no CUSUM rises and nothing is under way).
 fn plane_aileron_gain(gain: f64, to: f64) -> Flight {
+    plane_aileron_gain_read(gain, 0.0, to, |_| vec![healthy(0.02); 3])
+}
+
+/// As [`plane_aileron_gain`], with an offset `offset` too from 16 s, the filters' estimates
+/// given by `est`.
+fn plane_aileron_gain_read(
+    gain: f64,
+    offset: f64,
+    to: f64,
+    est: impl Fn(f64) -> Vec<AhcEstimate>,
+) -> Flight {
     let mut f = Flight::new("plane");
     let u = |t: f64| {
         vec![
@@ -44,15 +55,15 @@ fn plane_aileron_gain(gain: f64, to: f64) -> Flight {
             0.02 * (t * 1.7).sin(),
         ]
     };
-    let change =
-        move |t: f64, u: &[f64]| (0usize, if t >= 16.0 { (gain - 1.0) * u[0] } else { 0.0 });
-    f.fly(
-        0.0,
-        to,
-        u,
-        |_| vec![healthy(0.02); 3],
-        Some(&change as Change),
-    );
+    let change = move |t: f64, u: &[f64]| {
+        let deviation = if t >= 16.0 {
+            (gain - 1.0) * u[0] + offset
+        } else {
+            0.0
+        };
+        (0usize, deviation)
+    };
+    f.fly(0.0, to, u, est, Some(&change as Change));
     f
 }
 
@@ -70,6 +81,43 @@ fn d2_the_data_read_while_nothing_is_under_way_and_a_fault_is_what_the_classes_d
     // A gain above one is no class: read as clearly, it decides nothing.
     let f = plane_aileron_gain(1.3, 22.0);
     assert!(f.events(Event::Fault).is_empty(), "{:?}", f.decisions);
+    // A gain of 0.3 is a fault by D2; with an offset of +0.06 changing with it, a gain and an
+    // offset together explain the change clearly better than either: D2 leaves it to the
+    // filters (which here do not see it).
+    let f = plane_aileron_gain(0.3, 22.0);
+    assert_eq!(f.events(Event::Fault).len(), 1, "{:?}", f.decisions);
+    let est = |_: f64| vec![healthy(0.02); 3];
+    let f = plane_aileron_gain_read(0.3, 0.06, 22.0, est);
+    assert!(f.events(Event::Fault).is_empty(), "{:?}", f.decisions);
+}
+
+#[test]
+fn f1_a_gain_above_one_is_no_evidence_of_a_fault() {
+    // The aileron's gain changes from 16 s and the filters read it at `read` (their deviation
+    // alarms): a loss to 0.6 is decided at once by F1 (or F3). A gain of 1.3, which the data
+    // fit as such, is no fault's kind, and read as an offset (0.3 of the command's mean,
+    // 0.02-0.18) it is under the threshold: no F1, the data's reading holds F2 back, and the
+    // actuator is suspect by its alarm (S2).
+    let run = |gain: f64, read: f64| {
+        let est = faulted(3, 16.0, &[(0, estimate(read, 0.05, 0.0, 0.01))]);
+        plane_aileron_gain_read(gain, 0.0, 26.0, est)
+    };
+    let loss = run(0.6, 0.6);
+    let faults = loss.events(Event::Fault);
+    assert_eq!(faults.len(), 1, "{:?}", loss.decisions);
+    assert!(faults[0].t < 17.5, "{:?}", faults[0]);
+    let above = run(1.3, 1.8);
+    assert!(
+        above.events(Event::Fault).is_empty(),
+        "{:?}",
+        above.decisions
+    );
+    let suspect = above.events(Event::Suspect);
+    assert!(
+        suspect.iter().any(|d| d.rule == Some(Rule::S2)),
+        "{:?}",
+        above.decisions
+    );
 }
 
 #[test]

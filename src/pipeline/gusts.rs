@@ -5,12 +5,16 @@
 //! together to about 12 %): a rough flight whose stretch came in a lull reads as calm and keeps
 //! the threshold of calmer air for the rest of the flight. Each further stretch measures them
 //! the same way (the likelihood fit's wind state, [`calibrate_scaled`]); the level is pooled
-//! over the stretches as a variance (the mean of the squared levels, the calibration's
-//! included), so its spread falls as one over the square root of their number, and the
-//! threshold rises with it: `threshold = base × clamp(level, 1, MAX_GUST_FACTOR)`, never
-//! lowered in a flight (a level pooled over few stretches is still noisy). A stretch
-//! with a fault in force is not measured (the fault's residual is not wind), and neither is
-//! one with too few unbroken samples.
+//! over the stretches as a variance (the mean of the squared levels weighted by the stretches'
+//! lengths, the calibration's included), so its spread falls as one over the square root of
+//! the time measured, and the threshold rises with it:
+//! `threshold = base × clamp(level, 1, MAX_GUST_FACTOR)`, never lowered in a flight (a level
+//! pooled over few stretches is still noisy). Nothing is measured while a fault is in force
+//! (the fault's residual is not wind): a stretch a fault interrupts is measured up to
+//! [`EVIDENCE_MARGIN_S`] before the earliest evidence of that fault (its alarms, its
+//! decision, the data's estimate of its change's start) if at least half a stretch is left,
+//! so that a fault found soon after the calibration does not leave the flight at the
+//! calibration's reading for good. A stretch with too few unbroken samples is not measured.
 
 use super::calibrating::StoredSample;
 use crate::model::calibrate::{CalibrationSample, calibrate_scaled_within};
@@ -27,6 +31,10 @@ const EVALUATIONS: usize = 150;
 /// change of the weather: a fit costs about what 5 s of the filters do.
 const POOLED_FULLY: usize = 15;
 const LATER_EVERY: usize = 15;
+/// A stretch a fault interrupts ends this long before the fault's earliest evidence: the
+/// data's estimate of a change's start is good to a fraction of a second, and a filter's
+/// alarm comes after the change.
+const EVIDENCE_MARGIN_S: f64 = 1.0;
 
 pub(super) struct GustWatch {
     base: RateParams,
@@ -38,8 +46,10 @@ pub(super) struct GustWatch {
     stretch: Vec<StoredSample>,
     /// Samples a stretch takes (the calibration's).
     stretch_len: usize,
-    /// Σ level² and how many stretches (the calibration's included).
+    /// Σ weight × level², Σ weight (a stretch's length over the calibration's) and how many
+    /// stretches (the calibration's included).
     sum_sq: f64,
+    weight: f64,
     stretches: usize,
     /// Stretches completed since the calibration (measured or not).
     completed: usize,
@@ -74,6 +84,7 @@ impl GustWatch {
             stretch: Vec::with_capacity(stretch_len),
             stretch_len: stretch_len.max(2),
             sum_sq: level * level,
+            weight: 1.0,
             stretches: 1,
             completed: 0,
             factor,
@@ -82,18 +93,24 @@ impl GustWatch {
         })
     }
 
-    /// One sample of flight. With `fault_in_force` the stretch under way is dropped. Returns
-    /// the new factor when a completed stretch moved it.
+    /// One sample of flight. `fault_since`: a fault is in force, its earliest evidence at
+    /// that time; the stretch under way ends (measured up to before that evidence if enough
+    /// of it is left). Returns the new factor when a measured stretch moved it.
     pub(super) fn push(
         &mut self,
         t: f64,
         rates: [f64; 3],
         u: [f64; MAX_ACTUATORS],
-        fault_in_force: bool,
+        fault_since: Option<f64>,
     ) -> Option<f64> {
-        if fault_in_force {
+        if let Some(since) = fault_since {
+            let healthy = (self.stretch).partition_point(|s| s.t < since - EVIDENCE_MARGIN_S);
+            self.stretch.truncate(healthy);
+            let level = (2 * healthy >= self.stretch_len)
+                .then(|| self.completed_stretch())
+                .flatten();
             self.stretch.clear();
-            return None;
+            return level;
         }
         self.stretch.push(StoredSample {
             t,
@@ -104,16 +121,24 @@ impl GustWatch {
         if self.stretch.len() < self.stretch_len {
             return None;
         }
+        let factor = self.completed_stretch();
+        self.stretch.clear();
+        factor
+    }
+
+    /// The stretch in store is complete (or as complete as a fault lets it be): measured when
+    /// due and pooled by its length. Returns the new factor when it moved.
+    fn completed_stretch(&mut self) -> Option<f64> {
         self.completed += 1;
         let due = self.stretches < POOLED_FULLY || self.completed.is_multiple_of(LATER_EVERY);
-        let level = if due { self.measure() } else { None };
-        self.stretch.clear();
-        let level = level?;
-        self.sum_sq += level * level;
+        let level = if due { self.measure() } else { None }?;
+        let weight = self.stretch.len() as f64 / self.stretch_len as f64;
+        self.sum_sq += weight * level * level;
+        self.weight += weight;
         self.stretches += 1;
         // Only ever raised: a level pooled over few stretches is still noisy, and one read
         // low would bring back the false alarms of a calm reading.
-        let factor = factor_of((self.sum_sq / self.stretches as f64).sqrt()).max(self.factor);
+        let factor = factor_of((self.sum_sq / self.weight).sqrt()).max(self.factor);
         (factor != std::mem::replace(&mut self.factor, factor)).then_some(factor)
     }
 
@@ -201,6 +226,18 @@ mod tests {
         stretches: usize,
         fault_in_force: bool,
     ) -> GustWatch {
+        let fault_since = |_: f64| fault_in_force.then_some(0.0);
+        watch_flying(calibration_level, gusts, stretches * STRETCH, fault_since)
+    }
+
+    /// As [`watch_over`], `samples` samples, with a fault in force from when `fault_since`
+    /// (of the sample's time) gives its evidence.
+    fn watch_flying(
+        calibration_level: f64,
+        gusts: f64,
+        samples: usize,
+        fault_since: impl Fn(f64) -> Option<f64>,
+    ) -> GustWatch {
         let profile = Profile::resolve("quad-x").unwrap();
         let reference = profile.diagnosis.gusts.unwrap();
         let mut watch = GustWatch::new(
@@ -223,12 +260,12 @@ mod tests {
         // A sample's outputs act over the period after it (as telemetry pairs them): the
         // simulator's act over the period that ends at its sample.
         let mut previous = sim.step();
-        for _ in 0..stretches * STRETCH {
+        for _ in 0..samples {
             let s = sim.step();
             let mut u = [0.0; MAX_ACTUATORS];
             u[..4].copy_from_slice(&s.u[..4]);
             let rates = [previous.y[0], previous.y[1], previous.y[2]];
-            watch.push(previous.t, rates, u, fault_in_force);
+            watch.push(previous.t, rates, u, fault_since(previous.t));
             previous = s;
         }
         watch
@@ -268,5 +305,22 @@ mod tests {
         let watch = watch_over(1.0, 1.5, 3, true);
         assert_eq!(watch.stretches(), 1);
         assert_eq!(watch.factor, 1.0);
+    }
+
+    /// A fault decided 16 s into a stretch, its evidence from 15 s: the 14 s before that
+    /// evidence less the margin are measured and pooled, at 0.7 of a stretch's weight; one
+    /// decided 9 s in leaves too little, and nothing is measured.
+    #[test]
+    fn a_stretch_a_fault_interrupts_is_measured_up_to_its_evidence() {
+        let fault_since =
+            |decided: f64, evidence: f64| move |t: f64| (t >= decided).then_some(evidence);
+        let samples = STRETCH;
+        let long = watch_flying(1.0, 1.5, samples, fault_since(16.0, 15.0));
+        assert_eq!(long.stretches(), 2);
+        assert!((long.weight - 1.7).abs() < 0.01, "weight {}", long.weight);
+        assert!(long.factor > 1.05, "factor {}", long.factor);
+        let short = watch_flying(1.0, 1.5, samples, fault_since(9.0, 8.5));
+        assert_eq!(short.stretches(), 1);
+        assert_eq!(short.factor, 1.0);
     }
 }

@@ -208,7 +208,7 @@ impl VehiclePipeline {
         if let Some(g) = &mut r.gusts {
             // Only measured samples after the calibration stretch (a catch-up runs over it).
             if s.t > g.from_t
-                && let Some(factor) = g.push(s.t, s.rates, u, r.core.diag.fault_in_force())
+                && let Some(factor) = g.push(s.t, s.rates, u, r.core.diag.fault_evidence_since())
             {
                 r.core.diag.params.threshold = g.base_threshold * factor;
                 if g.worth_saying(factor) {
