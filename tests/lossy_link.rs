@@ -284,17 +284,25 @@ fn two_paths(second_path_delay: Duration, name: &str) -> (Streamed, usize, usize
         (share - LOSS * LOSS).abs() < 0.01,
         "lost on both: {share:.3}"
     );
-    // Every frame sent on both paths is one copy; the links' frames add up to what was sent.
+    // Every frame sent on both paths is dropped once: as a copy, or as late where the
+    // machine's load held its second delivery past the copy window, behind a newer frame (the
+    // count of frames handled below shows none went through twice). The links' frames add up
+    // to what was sent.
     let copies = count_before(&run.summary, "frames dropped as copies of another link's");
-    assert_eq!(copies, run.on_all, "{report}");
+    let late_all = count_before(&run.summary, "as late");
+    assert!(
+        copies <= run.on_all && run.on_all - copies <= late_all,
+        "{copies} copies, {late_all} late of {} sent on both: {report}",
+        run.on_all
+    );
+    let late = late_all - (run.on_all - copies);
     let total: usize = run.sent.iter().sum();
     assert!(
         run.summary.contains(&format!("link: frames {total} ")),
         "want {total} frames: {report}"
     );
-    // The monitor handles each frame some path delivered, once, less the late ones; none
-    // reaches it out of order.
-    let late = count_before(&run.summary, "as late");
+    // The monitor handles each frame some path delivered, once, less those dropped as late
+    // with no copy handled before; none reaches it out of order.
     let handled: usize = run
         .summary
         .lines()

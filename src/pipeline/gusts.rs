@@ -106,11 +106,11 @@ impl GustWatch {
         if let Some(since) = fault_since {
             let healthy = (self.stretch).partition_point(|s| s.t < since - EVIDENCE_MARGIN_S);
             self.stretch.truncate(healthy);
-            let level = (2 * healthy >= self.stretch_len)
+            let factor = (2 * healthy >= self.stretch_len)
                 .then(|| self.completed_stretch())
                 .flatten();
             self.stretch.clear();
-            return level;
+            return factor;
         }
         self.stretch.push(StoredSample {
             t,
@@ -155,9 +155,9 @@ impl GustWatch {
         self.stretches
     }
 
-    /// A stretch's length (s).
-    pub(super) fn stretch_s(&self) -> f64 {
-        self.stretch_len as f64 * self.dt
+    /// The flight time the pooled level was measured on (s), the calibration's included.
+    pub(super) fn measured_s(&self) -> f64 {
+        self.weight * self.stretch_len as f64 * self.dt
     }
 
     /// The stretch's gust level against the reference, as the calibration fits it; `None`

@@ -215,9 +215,9 @@ impl VehiclePipeline {
                     sink.message(
                         self.sysid,
                         &format!(
-                            "gusts measured again in flight ({} stretches of {:.0} s, the calibration's included): x{factor:.2} those the thresholds were set on; the deviation threshold is now {:.3} (rule T1)",
+                            "gusts measured again in flight ({:.0} s in {} stretches, the calibration's included): x{factor:.2} those the thresholds were set on; the deviation threshold is now {:.3} (rule T1)",
+                            g.measured_s(),
                             g.stretches(),
-                            g.stretch_s(),
                             r.core.diag.params.threshold
                         ),
                     );
