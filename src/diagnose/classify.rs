@@ -32,7 +32,7 @@ impl Diagnoser {
         let p = &self.params;
         match r.kind {
             ChangeKind::Gain => 1.0 - r.value > p.loe_tau,
-            ChangeKind::Offset => r.value.abs() >= p.threshold && r.value.abs() > p.bias_tau,
+            ChangeKind::Offset => self.is_fault_size_offset(r.value),
             ChangeKind::Stuck => {
                 let ms = r.command_rms * r.command_rms;
                 let rms = (r.value * r.value - 2.0 * r.value * r.command_mean + ms).max(0.0);
@@ -44,9 +44,13 @@ impl Diagnoser {
     /// offset that matches `(γ - 1) u` over the stretch in the least-squares sense is
     /// `(γ - 1)` times the command's mean there.
     pub(super) fn offset_reading_of_fault_size(&self, r: &Reading) -> bool {
+        self.is_fault_size_offset((r.value - 1.0) * r.command_mean)
+    }
+
+    /// An offset of a fault's size: at least `threshold` and beyond `bias_tau`.
+    fn is_fault_size_offset(&self, offset: f64) -> bool {
         let p = &self.params;
-        let offset = ((r.value - 1.0) * r.command_mean).abs();
-        offset >= p.threshold && offset > p.bias_tau
+        offset.abs() >= p.threshold && offset.abs() > p.bias_tau
     }
 
     /// D2: the actuator the data alarm on: named clearly by the whitened search (its margin is
