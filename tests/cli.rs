@@ -266,6 +266,11 @@ fn the_summary_says_which_fault_cleared_and_when() {
             .unwrap_or_else(|| panic!("no {name} row: {out}"))
             .to_string()
     };
+    // The table says which filter's bounds are probable and which guaranteed.
+    assert!(
+        out.contains("(mit-ukf: probable bounds, 3σ; set: guaranteed bounds,"),
+        "{out}"
+    );
     // With the fault's kind and onset (the decisions' first fault on motor 1).
     assert!(
         row("motor1 ").ends_with("cleared at t=136.08 s (loss_of_effectiveness from t=113.66 s)"),

@@ -481,6 +481,14 @@ fn the_chart_marks_the_healthy_value_and_the_decisions_and_the_headings_fit() {
         for name in ["UKF gamma", "UKF delta", "set gamma", "set delta", "state"] {
             assert!(heading.contains(name), "{w}x{h}: {name} cut in {heading}");
         }
+        // The table's title says which bounds are probable and which guaranteed.
+        let title = text
+            .iter()
+            .find(|l| l.contains("UKF:"))
+            .unwrap_or_else(|| panic!("{w}x{h}: no table title\n{screen}"));
+        for label in ["UKF: probable bounds", "set: guaranteed bounds"] {
+            assert!(title.contains(label), "{w}x{h}: {label} cut in {title}");
+        }
         // The gamma chart: from its title's row to the row of its time axis.
         let top = text
             .iter()

@@ -204,6 +204,29 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
         }
     }
 
+    /// Actuator `j`'s recent command `ū` (the mean over the samples since its set last
+    /// restarted, at most [`HISTORY`]; the calibration's mean before any) and the bounds of its
+    /// effective output less the healthy one there, `(γ - 1) ū + δ`: the polygon's extent
+    /// along the strips the latest samples cut. Near one operating point they are nearly
+    /// parallel, so this is bounded long before `γ` and `δ` are apart (a steady hover leaves them
+    /// free to trade along `γ u + δ`); and it is taken at the command now in force, since after
+    /// a loss the controller moves the command and the old operating point's output can stay
+    /// healthy-looking (a gain lost and a bias gained meet there). Guaranteed as the polygon is:
+    /// with the truth's point inside it, the truth's value at any command is inside its range.
+    pub fn output_range(&self, j: usize) -> (f64, f64, f64) {
+        let n = self.valid[j].min(HISTORY);
+        let u = if n == 0 {
+            self.params.command_ref[j]
+        } else {
+            (0..n)
+                .map(|k| self.history[(self.newest + HISTORY - k) % HISTORY].u[j])
+                .sum::<f64>()
+                / n as f64
+        };
+        let (lo, hi) = self.polygons[j].range(u, 1.0);
+        (u, lo - u, hi - u)
+    }
+
     /// The centroid of actuator `j`'s polygon: `[γ, δ]`.
     pub fn centre(&self, j: usize) -> [f64; 2] {
         self.polygons[j].centroid()

@@ -31,6 +31,11 @@ pub struct AhcEstimate {
     /// Set-membership estimates: whether the gamma, the delta bounds are still (nearly) the a
     /// priori box's (the data have not excited them).
     pub unexcited: [bool; 2],
+    /// Set-membership estimates: the bounds of the effective output less the healthy one at
+    /// the actuator's recent command `command_ref`, `(γ - 1) ū + δ` (healthy: 0), which the
+    /// data bound before they split it into a gain and a bias ([`AhcSet::output_range`]).
+    pub output_bounds: Option<[f64; 2]>,
+    pub command_ref: f64,
 }
 
 impl AhcEstimate {
@@ -74,6 +79,8 @@ pub(super) fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(
         excursion: 0.0,
         gain_gap: 0.0,
         unexcited: [false; 2],
+        output_bounds: None,
+        command_ref: 0.0,
     }
 }
 
@@ -87,6 +94,7 @@ pub(super) fn set_estimate<const N: usize, const M: usize>(
     let (gamma_lo, gamma_hi) = set.bounds(j, 0);
     let (delta_lo, delta_hi) = set.bounds(j, 1);
     let half2 = |lo: f64, hi: f64| 0.25 * (hi - lo) * (hi - lo);
+    let output = set.output_range(j);
     AhcEstimate {
         gamma,
         gamma_lo,
@@ -98,6 +106,8 @@ pub(super) fn set_estimate<const N: usize, const M: usize>(
         q_gamma: set.params.drift_gamma,
         q_delta: set.params.drift_delta,
         unexcited: [set.unexcited(j, 0), set.unexcited(j, 1)],
+        output_bounds: Some([output.1, output.2]),
+        command_ref: output.0,
         ..AhcEstimate::default()
     }
 }

@@ -89,6 +89,12 @@ pub struct ActuatorEstimate<'a> {
     /// The set filter: whether the gamma, the delta bounds are still the a priori box's.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unexcited: Option<[bool; 2]>,
+    /// The set filter: the bounds of the effective output less the healthy one at the
+    /// actuator's recent command `command_ref`, `(gamma - 1) command_ref + delta`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub output_bounds: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub command_ref: Option<f64>,
 }
 
 #[derive(Debug, Serialize)]
@@ -126,6 +132,8 @@ impl<'a> EstimateRecord<'a> {
                     delta_hi: e.delta_hi,
                     deviation: (filter < 2).then_some(e.deviation),
                     unexcited: (filter == 2).then_some(e.unexcited),
+                    output_bounds: e.output_bounds,
+                    command_ref: e.output_bounds.map(|_| e.command_ref),
                 })
                 .collect(),
         }

@@ -140,6 +140,10 @@ pub fn render(
         );
         let _ = writeln!(
             s,
+            "    (mit-ukf: probable bounds, 3σ; set: guaranteed bounds, while the noise stays within what the calibration stated, and of the output at the recent command, which the data bound before they split it into gamma and delta; mit-esmf: the detector's outer set, cut to the a priori box)"
+        );
+        let _ = writeln!(
+            s,
             "    {:<10} {:>3}  {:<8} {:>24} {:>27}  {:>17}  {:>9}  state",
             "actuator",
             "ch",
@@ -191,6 +195,13 @@ pub fn render(
                     if f == 0 { n.to_string() } else { String::new() },
                     if f == 0 { state.as_str() } else { "" }
                 );
+                if let Some([lo, hi]) = e.output_bounds {
+                    let _ = writeln!(
+                        s,
+                        "    {:<10} {:>3}  {:<8} output at its recent command {:.3}, less the healthy: [{lo:+.3}, {hi:+.3}]",
+                        "", "", "", e.command_ref
+                    );
+                }
             }
         }
     }

@@ -127,7 +127,10 @@ pub(super) fn actuator_table(
 ) {
     let block = Block::default()
         .borders(Borders::ALL)
-        .title(" actuators: gamma [0, 2] and delta [-1, 1], bound ─, healthy │, estimate ● ");
+        // What each pair of columns is comes first: a narrow terminal cuts the title's end.
+        .title(
+            " actuators · UKF: probable bounds (3σ) · set: guaranteed bounds · gamma [0, 2], delta [-1, 1], bound ─, healthy │, estimate ● ",
+        );
     let Some(p) = sysid.and_then(|s| monitor.pipelines.get(&s)) else {
         f.render_widget(Paragraph::new("no samples yet").block(block), area);
         return;
