@@ -33,7 +33,8 @@ pub struct AhcEstimate {
     pub unexcited: [bool; 2],
     /// Set-membership estimates: the bounds of the effective output less the healthy one at
     /// the actuator's recent command `command_ref`, `(γ - 1) ū + δ` (healthy: 0), which the
-    /// data bound before they split it into a gain and a bias ([`AhcSet::output_range`]).
+    /// data bound before they split it into a gain and a bias ([`AhcSet::output_range`]);
+    /// `None` where they have not (still the a priori box's extent), or for another filter.
     pub output_bounds: Option<[f64; 2]>,
     pub command_ref: f64,
 }
@@ -106,7 +107,7 @@ pub(super) fn set_estimate<const N: usize, const M: usize>(
         q_gamma: set.params.drift_gamma,
         q_delta: set.params.drift_delta,
         unexcited: [set.unexcited(j, 0), set.unexcited(j, 1)],
-        output_bounds: Some([output.1, output.2]),
+        output_bounds: (!set.output_unexcited(j, output.0)).then_some([output.1, output.2]),
         command_ref: output.0,
         ..AhcEstimate::default()
     }

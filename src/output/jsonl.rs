@@ -90,7 +90,8 @@ pub struct ActuatorEstimate<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unexcited: Option<[bool; 2]>,
     /// The set filter: the bounds of the effective output less the healthy one at the
-    /// actuator's recent command `command_ref`, `(gamma - 1) command_ref + delta`.
+    /// actuator's recent command `command_ref`, `(gamma - 1) command_ref + delta`; absent
+    /// where the data have not bounded it (the a priori box's extent).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub output_bounds: Option<[f64; 2]>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -133,7 +134,7 @@ impl<'a> EstimateRecord<'a> {
                     deviation: (filter < 2).then_some(e.deviation),
                     unexcited: (filter == 2).then_some(e.unexcited),
                     output_bounds: e.output_bounds,
-                    command_ref: e.output_bounds.map(|_| e.command_ref),
+                    command_ref: (filter == 2).then_some(e.command_ref),
                 })
                 .collect(),
         }

@@ -195,10 +195,15 @@ pub fn render(
                     if f == 0 { n.to_string() } else { String::new() },
                     if f == 0 { state.as_str() } else { "" }
                 );
-                if let Some([lo, hi]) = e.output_bounds {
+                if f == 2 {
+                    let bounds = e
+                        .output_bounds
+                        .map_or("[not excited]".to_string(), |[lo, hi]| {
+                            format!("[{lo:+.3}, {hi:+.3}]")
+                        });
                     let _ = writeln!(
                         s,
-                        "    {:<10} {:>3}  {:<8} output at its recent command {:.3}, less the healthy: [{lo:+.3}, {hi:+.3}]",
+                        "    {:<10} {:>3}  {:<8} output at its recent command {:.3}, less the healthy: {bounds}",
                         "", "", "", e.command_ref
                     );
                 }
