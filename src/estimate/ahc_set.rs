@@ -227,10 +227,9 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
         (u, lo - u, hi - u)
     }
 
-    /// Whether actuator `j`'s output range at command `u` ([`Self::output_range`]) is still
+    /// Whether actuator `j`'s output range `(u, lo, hi)` ([`Self::output_range`]) is still
     /// (nearly) the a priori box's along that direction: no sample has bounded it by a tenth.
-    pub fn output_unexcited(&self, j: usize, u: f64) -> bool {
-        let (lo, hi) = self.polygons[j].range(u, 1.0);
+    pub fn output_unexcited(&self, j: usize, (u, lo, hi): (f64, f64, f64)) -> bool {
         let [box_lo, box_hi] = [self.prior_lo[j], self.prior_hi[j]];
         let box_extent = (box_hi[0] - box_lo[0]) * u.abs() + (box_hi[1] - box_lo[1]);
         hi - lo >= 0.9 * box_extent

@@ -145,7 +145,7 @@ fn run_with<const N: usize, const M: usize>(
     }
     out.contradictions = set.contradictions;
     out.output_unexcited = (0..l)
-        .map(|j| set.output_unexcited(j, set.output_range(j).0))
+        .map(|j| set.output_unexcited(j, set.output_range(j)))
         .collect();
     out
 }
@@ -323,7 +323,12 @@ fn the_output_at_the_operating_point_is_bounded_before_the_gain_and_bias_are_apa
                     );
                 }
                 if s.t >= 20.0 && s.t < 30.0 {
-                    assert!(!set.output_unexcited(j, u), "t {:.2}, motor {}", s.t, j + 1);
+                    assert!(
+                        !set.output_unexcited(j, (u, lo, hi)),
+                        "t {:.2}, motor {}",
+                        s.t,
+                        j + 1
+                    );
                     let (gl, gh) = set.bounds(j, 0);
                     widest = widest.max(0.5 * (hi - lo));
                     widest_gain = widest_gain.max(0.5 * (gh - gl) * u);

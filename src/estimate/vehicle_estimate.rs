@@ -107,7 +107,7 @@ pub(super) fn set_estimate<const N: usize, const M: usize>(
         q_gamma: set.params.drift_gamma,
         q_delta: set.params.drift_delta,
         unexcited: [set.unexcited(j, 0), set.unexcited(j, 1)],
-        output_bounds: (!set.output_unexcited(j, output.0)).then_some([output.1, output.2]),
+        output_bounds: (!set.output_unexcited(j, output)).then_some([output.1, output.2]),
         command_ref: output.0,
         ..AhcEstimate::default()
     }
