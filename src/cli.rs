@@ -454,8 +454,9 @@ pub struct ReplayArgs {
     /// No dashboard (automatic when stdout is not a terminal or an output flag is `-`).
     #[arg(long)]
     pub headless: bool,
-    /// Draw every actuator's gamma and delta with both filters' bounds and the decisions
-    /// into this file: SVG, or PNG when its name ends in .png (`-`: SVG on standard output).
+    /// Draw every actuator's gamma, delta and output at its recent command ((γ-1)ū+δ) with
+    /// both filters' bounds and the decisions into this file: SVG, or PNG when its name ends
+    /// in .png (`-`: SVG on standard output).
     #[arg(long, value_name = "FILE.svg|FILE.png")]
     pub plot: Option<PathBuf>,
 }

@@ -520,10 +520,17 @@ fn replay_plot_of_the_heli_log_is_valid_svg_with_the_fault_marked() {
     assert!(out.starts_with("{http://www.w3.org/2000/svg}svg"), "{out}");
     let text = std::fs::read_to_string(&svg).unwrap();
     for name in ["swash1", "swash2", "swash3", "tail"] {
-        assert!(
-            text.contains(&format!("sysid 1 · {name} (ch")),
-            "{name} panel missing"
-        );
+        for panel in ["gamma", "delta", "output (γ-1)ū+δ"] {
+            let heading = format!("sysid 1 · {name} (ch");
+            assert!(
+                text.split(&heading).skip(1).any(|rest| rest
+                    .split('<')
+                    .next()
+                    .unwrap()
+                    .contains(panel)),
+                "{name} {panel} panel missing"
+            );
+        }
     }
     // The fault on swash3 is marked (a decision line with its label) after the onset, 108.2 s.
     assert!(text.contains(">fault "), "no fault mark");

@@ -50,6 +50,16 @@ impl AhcEstimate {
         }
         (c * dg * dg - 2.0 * b * dg * dd + a * dd * dd) / det
     }
+
+    /// A Kalman filter's estimate of the output's departure from the healthy one at command
+    /// `u`, `(γ - 1) u + δ`, and its probable bounds (±3σ of its (γ, δ) covariance block):
+    /// `[estimate, lo, hi]`, to set beside the set filter's guaranteed `output_bounds`.
+    pub fn output_probable(&self, u: f64) -> [f64; 3] {
+        let [gg, gd, dd] = self.block;
+        let centre = (self.gamma - 1.0) * u + self.delta;
+        let sd = (u * u * gg + 2.0 * u * gd + dd).max(0.0).sqrt();
+        [centre, centre - 3.0 * sd, centre + 3.0 * sd]
+    }
 }
 
 pub(super) fn estimate<const N: usize, const M: usize, E: Estimator<N, M>>(

@@ -1,5 +1,5 @@
-//! `replay --plot`: every actuator's gamma and delta over the log, both filters' estimates and
-//! bounds, the healthy value and the decisions, as SVG.
+//! `replay --plot`: every actuator's gamma, delta and output at its recent command over the
+//! log, both filters' estimates and bounds, the healthy value and the decisions, as SVG.
 //!
 //! Memory and file size stay flat in the length of the log: samples are kept as buckets (the
 //! estimate's lowest and highest value, the lower bound's lowest, the upper bound's highest),
@@ -74,8 +74,16 @@ impl Bucket {
     }
 }
 
-/// Per filter drawn, gamma's and delta's buckets.
-type Series = [[Vec<Bucket>; 2]; 2];
+/// Per filter drawn, the buckets of gamma, delta and the output's departure from the healthy
+/// one at the recent command, `(γ - 1) ū + δ`.
+type Series = [[Vec<Bucket>; 3]; 2];
+
+/// Each panel of an actuator: its title and the healthy value.
+const PANELS: [(&str, f64); 3] = [
+    ("gamma", 1.0),
+    ("delta", 0.0),
+    ("output (γ-1)ū+δ at the recent command ū", 0.0),
+];
 
 #[derive(Debug, Default)]
 pub struct PlotRecorder {
@@ -108,16 +116,25 @@ impl PlotRecorder {
                     self.traces.len() - 1
                 }
             };
+            // Both filters' output at the set's recent command.
+            let command = est[2][j].command_ref;
             for (f, series) in self.traces[idx].1.iter_mut().enumerate() {
                 let e = est[PLOTTED[f]][j];
+                let output = if PLOTTED[f] == 2 {
+                    let centre = (e.gamma - 1.0) * command + e.delta;
+                    let [lo, hi] = e.output_bounds.unwrap_or([f64::NAN; 2]);
+                    [centre, lo, hi]
+                } else {
+                    e.output_probable(command)
+                };
                 for (c, buckets) in series.iter_mut().enumerate() {
-                    let (v, lo, hi) = if c == 0 {
-                        (e.gamma, e.gamma_lo, e.gamma_hi)
-                    } else {
-                        (e.delta, e.delta_lo, e.delta_hi)
+                    let [v, lo, hi] = match c {
+                        0 => [e.gamma, e.gamma_lo, e.gamma_hi],
+                        1 => [e.delta, e.delta_lo, e.delta_hi],
+                        _ => output,
                     };
                     // Bounds still at the a priori box are not drawn (the legend says so).
-                    let (lo, hi) = if e.unexcited[c] {
+                    let (lo, hi) = if e.unexcited.get(c).copied().unwrap_or(false) {
                         (f64::NAN, f64::NAN)
                     } else {
                         (lo, hi)
@@ -156,10 +173,10 @@ impl PlotRecorder {
         self.marks.push((d.sysid, d.t, d.actuator.clone(), label));
     }
 
-    /// One SVG: for every actuator a gamma panel and a delta panel.
+    /// One SVG: for every actuator a gamma, a delta and an output panel.
     pub fn render(&self, title: &str) -> String {
         let n = self.traces.len().max(1);
-        let height = TOP + 2.0 * n as f64 * (PANEL_H + PANEL_GAP);
+        let height = TOP + (PANELS.len() * n) as f64 * (PANEL_H + PANEL_GAP);
         let mut out = String::new();
         // The title cut to the canvas.
         let room = ((W - LEFT) / 7.5) as usize;
@@ -195,7 +212,7 @@ impl PlotRecorder {
         let span = (t1 - t0).max(1e-3);
         let mut panel = 0;
         for ((sysid, name, channel), series) in &self.traces {
-            for (c, (which, healthy)) in [("gamma", 1.0), ("delta", 0.0)].into_iter().enumerate() {
+            for (c, (which, healthy)) in PANELS.into_iter().enumerate() {
                 let y0 = TOP + panel as f64 * (PANEL_H + PANEL_GAP);
                 panel += 1;
                 let frame = Frame::new(y0, t0, span, series, c, healthy);
@@ -495,76 +512,5 @@ fn legend(out: &mut String, y0: f64, hidden: usize) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn ticks_fall_on_round_values_and_time_reads_as_a_clock() {
-        assert_eq!(nice_step(0.93, 4), 0.5);
-        assert_eq!(nice_step(0.4, 4), 0.1);
-        assert_eq!(nice_step(2.6, 4), 1.0);
-        assert_eq!(time_step(60.0, 8), 10.0);
-        assert_eq!(time_step(3609.0, 8), 600.0);
-        assert_eq!(clock(94.0), "1:34");
-        assert_eq!(clock(3609.0), "1:00:09");
-        assert_eq!(tick_label(-0.000001, 0.05), "0.00");
-        assert_eq!(tick_label(1.5, 0.5), "1.5");
-        assert_eq!(tick_label(2.0, 1.0), "2");
-    }
-
-    /// Dense decisions: the labels drawn never overlap in a lane, the rest are counted.
-    #[test]
-    fn decision_labels_never_overlap() {
-        let series: Series = Default::default();
-        let frame = Frame::new(TOP, 0.0, 600.0, &series, 0, 1.0);
-        let marks: Vec<(u8, f64, Option<String>, String)> = (0..60)
-            .map(|k| (1, 10.0 * k as f64, Some("m".into()), "changed loss".into()))
-            .collect();
-        let mut out = String::new();
-        let hidden = frame.marks(&mut out, &marks, 1, "m");
-        let mut lanes: std::collections::BTreeMap<String, Vec<(f64, f64)>> = Default::default();
-        let mut labelled = 0;
-        for line in out.lines().filter(|l| l.contains("<text")) {
-            let attr = |name: &str| -> String {
-                let at = line.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
-                line[at..].split('"').next().unwrap().to_string()
-            };
-            let x: f64 = attr("x").parse().unwrap();
-            let w = "changed loss".len() as f64 * LABEL_PX_PER_CHAR;
-            let span = if attr("text-anchor") == "start" {
-                (x, x + w)
-            } else {
-                (x - w, x)
-            };
-            lanes.entry(attr("y")).or_default().push(span);
-            labelled += 1;
-        }
-        assert_eq!(labelled + hidden, 60);
-        assert!(labelled >= 2 * LANES && hidden > 0);
-        assert!(lanes.len() <= LANES);
-        for spans in lanes.values_mut() {
-            spans.sort_by(|a, b| a.0.total_cmp(&b.0));
-            for w in spans.windows(2) {
-                assert!(w[0].1 <= w[1].0, "{w:?}");
-            }
-        }
-    }
-
-    /// Merging keeps the envelope: a one-sample spike survives any number of merges.
-    #[test]
-    fn merged_buckets_keep_a_spike() {
-        let mut b: Vec<Bucket> = (0..1024)
-            .map(|k| {
-                let v = if k == 517 { 0.2 } else { 1.0 };
-                Bucket::new(k as f64, v, v - 0.1, v + 0.1)
-            })
-            .collect();
-        for _ in 0..10 {
-            merge_pairs(&mut b);
-        }
-        assert_eq!(b.len(), 1);
-        assert_eq!((b[0].est_lo, b[0].est_hi), (0.2, 1.0));
-        assert!((b[0].lo - 0.1).abs() < 1e-12 && (b[0].hi - 1.1).abs() < 1e-12);
-        assert_eq!((b[0].t0, b[0].t1), (0.0, 1023.0));
-    }
-}
+#[path = "plot_tests.rs"]
+mod tests;

@@ -53,7 +53,7 @@ seen = {"heartbeat": [], "statustext": [], "named_value_float": [], "ahc_estimat
 
 def check_estimate(m):
     """The probable bounds finite around their estimate; each guaranteed coefficient either NaN
-    with its not-excited bit or finite with lo <= estimate <= hi."""
+    with its not-excited bit or finite with lo <= estimate <= hi; the output bounds ordered."""
     bad = []
     if not (m.ukf_gamma_lo <= m.ukf_gamma <= m.ukf_gamma_hi):
         bad.append("ukf gamma")
@@ -64,6 +64,13 @@ def check_estimate(m):
                 bad.append(f"set {bit}: numbers with the not-excited bit")
         elif not (lo <= est <= hi):
             bad.append(f"set {bit}: {lo} {est} {hi}")
+    # The extension fields: the output at the recent command, probable always, guaranteed or
+    # NaN (not excited) as a pair.
+    if not (math.isfinite(m.command_ref) and m.ukf_output_lo <= m.ukf_output_hi):
+        bad.append(f"output: {m.command_ref} {m.ukf_output_lo} {m.ukf_output_hi}")
+    lo, hi = m.set_output_lo, m.set_output_hi
+    if math.isnan(lo) != math.isnan(hi) or (not math.isnan(lo) and not lo <= hi):
+        bad.append(f"set output: {lo} {hi}")
     return bad
 
 

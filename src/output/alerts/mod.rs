@@ -2,7 +2,8 @@
 //! (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) sent as the vehicle's system id with
 //! component id 191, a STATUSTEXT per decision (severity by class, at most 50 characters,
 //! rate-limited), NAMED_VALUE_FLOAT `g_<name>` / `d_<name>` per actuator at 2 Hz, and our
-//! AHC_ESTIMATE with the probable (MIT-UKF) and guaranteed (set filter) bounds. Pure: encoded frames go to `outbox`; the caller
+//! AHC_ESTIMATE with the probable (MIT-UKF) and guaranteed (set filter) bounds of gamma, delta
+//! and the output at the recent command. Pure: encoded frames go to `outbox`; the caller
 //! sends them. It never commands the vehicle.
 
 use crate::diagnose::vehicle::{Decision, Event, FaultClass};
@@ -439,6 +440,12 @@ impl Alerts {
                     .copied()
                     .unwrap_or(AhcState::AHC_STATE_HEALTHY);
                 let [g, d] = guaranteed(&l.set);
+                // Both filters' bounds of the output at the same recent command.
+                let ukf_output = l.ukf.output_probable(l.set.command_ref);
+                let set_output = l
+                    .set
+                    .output_bounds
+                    .map_or([f32::NAN; 2], |b| b.map(|v| v as f32));
                 let msg = MavMessage::AHC_ESTIMATE(AHC_ESTIMATE_DATA {
                     time_boot_ms,
                     actuator: l.index,
@@ -458,6 +465,11 @@ impl Alerts {
                     set_delta_lo: d[1],
                     set_delta_hi: d[2],
                     set_unexcited: u8::from(l.set.unexcited[0]) | u8::from(l.set.unexcited[1]) << 1,
+                    command_ref: l.set.command_ref as f32,
+                    ukf_output_lo: ukf_output[1] as f32,
+                    ukf_output_hi: ukf_output[2] as f32,
+                    set_output_lo: set_output[0],
+                    set_output_hi: set_output[1],
                 });
                 self.push(sysid, &msg);
             }

@@ -346,6 +346,8 @@ fn ahc_estimate_sends_the_probable_and_the_guaranteed_bounds_and_nan_where_not_e
             delta: 0.01,
             delta_lo: -0.02,
             delta_hi: 0.04,
+            // Variances of gamma 0.01², delta 0.02², uncorrelated.
+            block: [1e-4, 0.0, 4e-4],
             ..AhcEstimate::default()
         };
         // Not sent: the MIT-ESMF is a detector, not the guaranteed bound.
@@ -358,6 +360,8 @@ fn ahc_estimate_sends_the_probable_and_the_guaranteed_bounds_and_nan_where_not_e
             delta_lo: -0.1,
             delta_hi: 0.05,
             unexcited: [j == 1, j == 2],
+            output_bounds: (j != 3).then_some([-0.2, -0.1]),
+            command_ref: 0.5,
             ..AhcEstimate::default()
         };
     }
@@ -390,6 +394,25 @@ fn ahc_estimate_sends_the_probable_and_the_guaranteed_bounds_and_nan_where_not_e
             assert!(delta.iter().all(|v| v.is_nan()), "{m:?}");
         } else {
             assert_eq!(delta, [-0.03, -0.1, 0.05]);
+        }
+        // The output at the set's recent command: the set's guaranteed bounds (NaN where not
+        // excited) beside the MIT-UKF's probable ones, (γ - 1) u + δ ± 3 sd(γ u + δ).
+        assert_eq!(m.command_ref, 0.5);
+        if j == 3 {
+            assert!(
+                m.set_output_lo.is_nan() && m.set_output_hi.is_nan(),
+                "{m:?}"
+            );
+        } else {
+            assert_eq!([m.set_output_lo, m.set_output_hi], [-0.2, -0.1]);
+        }
+        let centre = (0.9 - 0.01 * j as f64 - 1.0) * 0.5 + 0.01;
+        let sd = (0.25f64 * 1e-4 + 4e-4).sqrt();
+        for (sent, want) in [m.ukf_output_lo, m.ukf_output_hi]
+            .into_iter()
+            .zip([centre - 3.0 * sd, centre + 3.0 * sd])
+        {
+            assert!((f64::from(sent) - want).abs() < 1e-6, "{m:?}");
         }
     }
 }

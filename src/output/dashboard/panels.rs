@@ -129,7 +129,7 @@ pub(super) fn actuator_table(
         .borders(Borders::ALL)
         // What each pair of columns is comes first: a narrow terminal cuts the title's end.
         .title(
-            " actuators · UKF: probable bounds (3σ) · set: guaranteed bounds · gamma [0, 2], delta [-1, 1], bound ─, healthy │, estimate ● ",
+            " actuators · UKF: probable bounds (3σ) · set: guaranteed bounds · gamma [0, 2], delta [-1, 1], output (γ-1)ū+δ at the recent command ū [-0.5, 0.5], bound ─, healthy │, estimate ● ",
         );
     let Some(p) = sysid.and_then(|s| monitor.pipelines.get(&s)) else {
         f.render_widget(Paragraph::new("no samples yet").block(block), area);
@@ -150,13 +150,15 @@ pub(super) fn actuator_table(
         return;
     };
     // Bar width from the space left after the fixed columns (name 8, channel 3, two gamma
-    // values 6, the state 13, six gaps, the borders): at 80 columns 9, which holds every
-    // heading and "unexcited".
-    let bar = ((area.width as usize).saturating_sub(8 + 3 + 2 * 6 + 13 + 6 + 2) / 4).clamp(4, 30);
+    // values 6, the state 13, seven gaps, the borders) for five bars: at 80 columns 7, which
+    // holds every heading and "unexc.".
+    let bar = ((area.width as usize).saturating_sub(8 + 3 + 2 * 6 + 13 + 7 + 2) / 5).clamp(6, 30);
     let unexcited = if bar >= 11 {
         "not excited"
-    } else {
+    } else if bar >= 9 {
         "unexcited"
+    } else {
+        "unexc."
     };
     let header = Row::new(vec![
         "actuator".to_string(),
@@ -171,6 +173,11 @@ pub(super) fn actuator_table(
         format!(
             "{:<w$}",
             if bar >= 9 { "set delta" } else { "set δ" },
+            w = bar
+        ),
+        format!(
+            "{:<w$}",
+            if bar >= 10 { "set output" } else { "set out" },
             w = bar
         ),
         "state".into(),
@@ -217,7 +224,17 @@ pub(super) fn actuator_table(
             (format!("{:5.2} {gamma}", e.gamma), delta)
         };
         let (ug, ud) = cells(&est[0][j]);
-        let (eg, ed) = cells(&est[2][j]);
+        let set = &est[2][j];
+        let (eg, ed) = cells(set);
+        // What the set bounds before it splits gain from bias: the output's departure from
+        // the healthy one at the recent command (healthy 0).
+        let output = match set.output_bounds {
+            Some([lo, hi]) => {
+                let centre = (set.gamma - 1.0) * set.command_ref + set.delta;
+                bound_bar(centre, lo, hi, 0.0, (-0.5, 0.5), bar)
+            }
+            None => format!("{:<bar$}", unexcited),
+        };
         let mut row = Row::new(vec![
             a.name.clone(),
             a.channel.to_string(),
@@ -225,6 +242,7 @@ pub(super) fn actuator_table(
             ud,
             eg,
             ed,
+            output,
             state,
         ])
         .style(style);
@@ -239,6 +257,7 @@ pub(super) fn actuator_table(
         Constraint::Length(bar as u16 + 6),
         Constraint::Length(bar as u16),
         Constraint::Length(bar as u16 + 6),
+        Constraint::Length(bar as u16),
         Constraint::Length(bar as u16),
         Constraint::Min(8),
     ];
