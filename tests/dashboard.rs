@@ -543,14 +543,15 @@ fn the_chart_marks_the_healthy_value_and_the_decisions_and_the_headings_fit() {
     }
 }
 
-/// The quad's motor 2 loses 30 % at 45 s on the log's clock. At 52 s, the set's output column
-/// (its guaranteed bounds of `(γ - 1) ū + δ`, healthy 0 marked │): motor 2's bound lies wholly
-/// on one side of the healthy mark, every other motor's holds it (drawn over by the estimate's
-/// ● or with bound on both sides). The helicopter's swash servos', still the a priori box's
-/// extent (the rate rows see the three servos only in combination), say "not excited"; its
-/// tail's, alone on the yaw row, is bounded.
+/// The set's output column (its guaranteed bounds of `(γ - 1) ū + δ`, healthy 0 marked │):
+/// the lost actuator's bound lies wholly on one side of the healthy mark, every other's holds
+/// it (drawn over by the estimate's ● or with bound on both sides). The quad's motor 2 loses
+/// 30 % at 45 s on the log's clock, seen at 52 s; the demo helicopter's swash 2 40 % at 42 s,
+/// seen at 51.5 s (its swash servos bounded through the a_z row the set filter takes beside the
+/// identified model's rates; at its command of 0.43 the loss moves the output by -0.17, near
+/// the bound's half-width, and the bound holds 0 now and then: at 51.5 s its top is -0.03).
 #[test]
-fn the_set_output_column_excludes_the_healthy_output_of_the_lost_motor_only() {
+fn the_set_output_column_excludes_the_healthy_output_of_the_lost_actuator_only() {
     let column = |screen: &str, name: &str| -> String {
         let heading = screen
             .lines()
@@ -568,29 +569,25 @@ fn the_set_output_column_excludes_the_healthy_output_of_the_lost_motor_only() {
         let end = (at + 10..start.len()).find(|&k| start[k] != ' ').unwrap();
         row(screen, name).chars().skip(at).take(end - at).collect()
     };
-    let tlog = sim_tlog("quad-x-motor2-loe-live");
-    let (m, d, hist) = state_of(&tlog, 52.0);
-    let s = draw(&m, &d, &hist, 160, 40, false);
-    for motor in ["motor1", "motor2", "motor3", "motor4"] {
-        let cell = column(&s, motor);
-        let chars: Vec<char> = cell.chars().collect();
-        let bound = |c: &char| *c == '─' || *c == '●';
-        let healthy = chars.iter().position(|c| *c == '│');
-        let holds = match healthy {
-            None => chars.contains(&'●'),
-            Some(h) => chars[..h].iter().any(bound) && chars[h + 1..].iter().any(bound),
-        };
-        assert_eq!(holds, motor != "motor2", "{motor}: {cell:?}\n{s}");
-        assert!(chars.iter().any(bound), "{motor}: {cell:?}\n{s}");
-    }
-    let heli = screen(50.0, 160, 40, false);
-    for servo in ["swash1", "swash2", "swash3", "tail"] {
-        let cell = column(&heli, servo);
-        assert_eq!(
-            cell.contains("not excited"),
-            servo != "tail",
-            "{servo}\n{heli}"
-        );
+    let quad = sim_tlog("quad-x-motor2-loe-live");
+    let (m, d, hist) = state_of(&quad, 52.0);
+    let quad = draw(&m, &d, &hist, 160, 40, false);
+    let heli = screen(51.5, 160, 40, false);
+    for (s, names, lost) in [
+        (&quad, ["motor1", "motor2", "motor3", "motor4"], "motor2"),
+        (&heli, ["swash1", "swash2", "swash3", "tail"], "swash2"),
+    ] {
+        for name in names {
+            let cell = column(s, name);
+            let chars: Vec<char> = cell.chars().collect();
+            let bound = |c: &char| *c == '─' || *c == '●';
+            let holds = match chars.iter().position(|c| *c == '│') {
+                None => chars.contains(&'●'),
+                Some(h) => chars[..h].iter().any(bound) && chars[h + 1..].iter().any(bound),
+            };
+            assert_eq!(holds, name != lost, "{name}: {cell:?}\n{s}");
+            assert!(chars.iter().any(bound), "{name}: {cell:?}\n{s}");
+        }
     }
 }
 

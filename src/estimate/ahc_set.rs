@@ -10,7 +10,9 @@
 //! ```
 //!
 //! (rows p, q, r and, measured, a_z; `B` the model's effect of one unit of output on each row
-//! over a step). `e` is what the healthy model leaves unexplained on a step (gusts, model error,
+//! over a step). A model that predicts the rates only (an identified helicopter's) may still
+//! give the set a static a_z row ([`AhcSet::with_vertical`]): `a_z - c_z = Σ g_z,j η_j + e`, its
+//! bound measured like the others'; it bounds the levels, not the changes (see below). `e` is what the healthy model leaves unexplained on a step (gusts, model error,
 //! the gyro's noise on both samples); `σ(0)` is its stated bound, `σ(m)` that of its change
 //! over `m` samples (both from the calibration stretch, with a margin).
 //!
@@ -99,8 +101,11 @@ pub struct AhcSet<const N: usize, const M: usize> {
     /// The a priori box per actuator: `[γ, δ]` low and high.
     prior_lo: [[f64; 2]; MAX_ACTUATORS],
     prior_hi: [[f64; 2]; MAX_ACTUATORS],
-    /// `B`: rows × actuators.
+    /// `B`: rows × actuators; the rows in use (`M`, or 4 with a vertical row).
     effect: [[f64; MAX_ACTUATORS]; 4],
+    rows: usize,
+    /// A static a_z row's trim `c_z`, for a model that predicts the rates only.
+    vertical_offset: Option<f64>,
     /// A left inverse of `B` (actuators × rows) when it has full column rank, and each
     /// actuator's bound per lag through it (`Σ_i |L_ji| σ_i(m)`).
     left_inverse: Option<[[f64; 4]; MAX_ACTUATORS]>,
@@ -151,18 +156,11 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
         for j in 0..l {
             polygons[j] = Polygon::from_box(lo[j], hi[j]);
         }
-        let left = left_inverse(&effect, l, M, &params.residual_bound[0]);
-        let mut output_bound = [[f64::INFINITY; LAGS.len()]; MAX_ACTUATORS];
-        if let Some(li) = &left {
-            for j in 0..l {
-                for (k, bound) in params.residual_bound.iter().enumerate() {
-                    output_bound[j][k] = (0..M).map(|i| li[j][i].abs() * bound[i]).sum();
-                }
-            }
-        }
-        Self {
-            left_inverse: left,
-            output_bound,
+        let mut set = Self {
+            left_inverse: None,
+            output_bound: [[f64::INFINITY; LAGS.len()]; MAX_ACTUATORS],
+            rows: M,
+            vertical_offset: None,
             model,
             params,
             l,
@@ -177,6 +175,46 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
             contradictions: 0,
             contradicted: [false; MAX_ACTUATORS],
             output_bounds: [(f64::NEG_INFINITY, f64::INFINITY); MAX_ACTUATORS],
+        };
+        set.bound_per_lag();
+        set
+    }
+
+    /// A static a_z row for a model of the rates only (`M` = 3): `g_z,j` per unit of each
+    /// output and the trim `c_z`. Taken only with a stated bound of its residual at every lag
+    /// (measured on a calibration stretch); then `try_step_az` takes a_z.
+    pub fn with_vertical(mut self, gain: &[f64], offset: f64) -> Self {
+        let bounded = self
+            .params
+            .residual_bound
+            .iter()
+            .all(|b| b[3].is_finite() && b[3] > 0.0);
+        if M != 3 || gain.len() < self.l || !bounded || !offset.is_finite() {
+            return self;
+        }
+        self.effect[3][..self.l].copy_from_slice(&gain[..self.l]);
+        self.rows = 4;
+        self.vertical_offset = Some(offset);
+        self.bound_per_lag();
+        self
+    }
+
+    /// The rows a step takes (3 or 4).
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// The left inverse of `B` and each output's bound through it per lag.
+    fn bound_per_lag(&mut self) {
+        let (l, rows) = (self.l, self.rows);
+        self.left_inverse = left_inverse(&self.effect, l, rows, &self.params.residual_bound[0]);
+        self.output_bound = [[f64::INFINITY; LAGS.len()]; MAX_ACTUATORS];
+        if let Some(li) = &self.left_inverse {
+            for j in 0..l {
+                for (k, bound) in self.params.residual_bound.iter().enumerate() {
+                    self.output_bound[j][k] = (0..rows).map(|i| li[j][i].abs() * bound[i]).sum();
+                }
+            }
         }
     }
 
@@ -250,8 +288,19 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
     /// One sample: the commands that acted over the step (as the model takes them) and the
     /// measurement.
     pub fn try_step(&mut self, u: &[f64], y: &SVector<f64, M>) -> Result<(), EstimatorError> {
+        self.try_step_az(u, y, None)
+    }
+
+    /// [`Self::try_step`] with the a_z of a vertical row ([`Self::with_vertical`]); without it
+    /// such a set bounds nothing this step (its coefficients drift).
+    pub fn try_step_az(
+        &mut self,
+        u: &[f64],
+        y: &SVector<f64, M>,
+        az: Option<f64>,
+    ) -> Result<(), EstimatorError> {
         check_commands(self.model.input_dim(), u)?;
-        if !y.iter().all(|v| v.is_finite()) {
+        if !(y.iter().all(|v| v.is_finite()) && az.is_none_or(f64::is_finite)) {
             return Err(EstimatorError::NonFinite {
                 what: "measurement",
             });
@@ -263,11 +312,20 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
         }
         self.contradicted = [false; MAX_ACTUATORS];
         let rates = [y[0], y[1], y[2]];
+        let vertical = match (self.vertical_offset, az) {
+            (Some(c), Some(a)) => Some(a - c),
+            _ => None,
+        };
         let Some(previous) = self.previous.replace(rates) else {
             self.valid = [0; MAX_ACTUATORS];
             self.keep_in_prior();
             return Ok(());
         };
+        if self.vertical_offset.is_some() && vertical.is_none() {
+            self.valid = [0; MAX_ACTUATORS];
+            self.keep_in_prior();
+            return Ok(());
+        }
         let mut z0 = SVector::<f64, N>::zeros();
         z0.fixed_rows_mut::<3>(0).copy_from_slice(&previous);
         let known = self.model.f(&z0, u);
@@ -277,6 +335,8 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
         }
         if M == 4 {
             r[3] = y[3] - self.model.h_offset(u)[3];
+        } else if let Some(v) = vertical {
+            r[3] = v;
         }
         self.bound_outputs(&r, u);
         let mut now = Past::default();
@@ -330,7 +390,10 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
     /// Cut actuator `j`'s polygon by the gain bounds of this sample's changes since the stored
     /// ones (see the module note). False when a cut leaves nothing.
     fn cut_changes(&self, j: usize, now: &Past, p: &mut Polygon<VERTICES>) -> bool {
-        if self.left_inverse.is_none() {
+        // A static a_z row beside a dynamic model of the rates errs by the vertical response it
+        // does not model, which moves with the commands: its changes are not bounded apart
+        // from the command's changes, as these cuts need.
+        if self.left_inverse.is_none() || self.vertical_offset.is_some() {
             return true;
         }
         let (dg, dd) = (self.params.drift_gamma, self.params.drift_delta);
@@ -362,7 +425,7 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
         let sigma = self.params.residual_bound[0];
         if let Some(li) = &self.left_inverse {
             for j in 0..l {
-                let centre: f64 = (0..M).map(|i| li[j][i] * r[i]).sum();
+                let centre: f64 = (0..self.rows).map(|i| li[j][i] * r[i]).sum();
                 let half = self.output_bound[j][0];
                 self.output_bounds[j] = (centre - half, centre + half);
             }
@@ -375,7 +438,7 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
             range[j] = self.polygons[j].range(u[j], 1.0);
         }
         for _ in 0..2 {
-            for i in 0..M {
+            for i in 0..self.rows {
                 for j in 0..l {
                     let b = self.effect[i][j];
                     if b.abs() < 1e-12 {

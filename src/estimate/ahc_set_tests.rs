@@ -353,3 +353,82 @@ fn the_output_at_the_operating_point_is_bounded_before_the_gain_and_bias_are_apa
         }
     }
 }
+
+/// A static a_z row given to a set on a model of the rates only (`with_vertical`) bounds each
+/// sample's outputs as the model with a_z does: on a quad's flight with a motor loss, stepped
+/// through both, every step's output bounds are the same, and before the loss (no
+/// contradiction) the set with the row, which takes the levels only, holds the other's. Without
+/// the row the four motors on three rows are not separated; with no stated bound of the row it
+/// is not taken; a step whose a_z is lost only drifts.
+#[test]
+fn a_vertical_row_on_a_rates_only_model_bounds_the_outputs_as_the_model_with_a_z() {
+    let cfg = flight("quad-x", &["actuator='motor2'\nt=20.0\ngamma=0.6"], 7);
+    let p = cfg.profile.rate_params();
+    let bound = residual_bound(&cfg);
+    let mut residual_bound = [bound.map(|b| 2.0 * b); LAGS.len()];
+    residual_bound[0] = bound;
+    let params = AhcSetParams {
+        residual_bound,
+        drift_gamma: crate::estimate::vehicle::SET_DRIFT_PER_S * DT,
+        drift_delta: crate::estimate::vehicle::SET_DRIFT_PER_S * DT,
+        model_error: 0.1,
+        command_ref: [0.5; crate::model::MAX_ACTUATORS],
+    };
+    let (lo, hi) = ([[-1.0, -1.0]; 4], [[3.0, 1.0]; 4]);
+    let mut with_az = AhcSet::<11, 4>::new(RateModel::new(&p, DT).unwrap(), params, &lo, &hi);
+    let rates_only = AhcSet::<11, 3>::new(RateModel::new(&p, DT).unwrap(), params, &lo, &hi);
+    assert!(!rates_only.separates_outputs() && rates_only.rows() == 3);
+    let mut unbounded = params;
+    unbounded.residual_bound[3][3] = 0.0;
+    let not_taken = AhcSet::<11, 3>::new(RateModel::new(&p, DT).unwrap(), unbounded, &lo, &hi)
+        .with_vertical(&p.vertical, p.vertical_offset);
+    assert!(!not_taken.separates_outputs() && not_taken.rows() == 3);
+    let mut vertical = rates_only.with_vertical(&p.vertical, p.vertical_offset);
+    assert!(vertical.separates_outputs() && vertical.rows() == 4);
+    let mut sim = VehicleSim::new(cfg).unwrap();
+    let mut excluded = false;
+    for k in 0..(40.0 / DT) as usize {
+        let s = sim.step();
+        with_az
+            .try_step(&s.u[..4], &SVector::<f64, 4>::from_column_slice(&s.y[..4]))
+            .unwrap();
+        let rates = SVector::<f64, 3>::from_column_slice(&s.y[..3]);
+        vertical
+            .try_step_az(&s.u[..4], &rates, Some(s.y[3]))
+            .unwrap();
+        for j in 0..4 {
+            let (a, b) = (with_az.output_bounds[j], vertical.output_bounds[j]);
+            let same = |x: f64, y: f64| x == y || (x - y).abs() < 1e-12;
+            assert!(
+                same(a.0, b.0) && same(a.1, b.1),
+                "t {:.2}, motor {}: {a:?} against {b:?}",
+                s.t,
+                j + 1
+            );
+            if s.gamma[1] == 1.0 {
+                assert_eq!(vertical.contradictions + with_az.contradictions, 0);
+                for c in 0..2 {
+                    let (a, b) = (with_az.bounds(j, c), vertical.bounds(j, c));
+                    assert!(
+                        b.0 <= a.0 + 1e-9 && a.1 <= b.1 + 1e-9,
+                        "{a:?} outside {b:?}"
+                    );
+                }
+            }
+        }
+        if k % 100 == 99 {
+            let mut lost = vertical.clone();
+            lost.try_step_az(&s.u[..4], &rates, None).unwrap();
+            for j in 0..4 {
+                let ((a, b), (c, d)) = (vertical.bounds(j, 0), lost.bounds(j, 0));
+                let drift = lost.params.drift_gamma;
+                assert!(c <= a && d >= b && c >= a - drift - 1e-12 && d <= b + drift + 1e-12);
+            }
+        }
+        excluded |= vertical.output_range(1).2 < 0.0;
+    }
+    assert!(
+        excluded,
+        "the lost motor's output never excluded the healthy one"
+    );
+}

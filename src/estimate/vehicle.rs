@@ -63,6 +63,12 @@ pub trait VehicleFilters: Send {
     );
     /// Actuator `j`'s guaranteed estimate: the set-membership filter's.
     fn guaranteed(&self, j: usize) -> AhcEstimate;
+    /// A static a_z row for the set filter when the detectors take the rates only (`g_z` per
+    /// actuator, the trim): `step` then takes a fourth measurement, a_z, for the set alone, and
+    /// `healthy_residual` its residual. It bounds once `set_residual_bounds` states its bound.
+    fn set_vertical(&mut self, gain: &[f64], offset: f64);
+    /// The rows of the set filter's residual: `measurements()`, or 4 with a vertical row.
+    fn set_rows(&self) -> usize;
     /// The normalised innovation square (UKF) or `M (1 - consistency)` (ESMF) of the last step.
     fn nis(&self, filter: usize) -> f64;
     /// Re-initialise one filter (after repeated numerical failure).
@@ -177,7 +183,7 @@ use follow::fit_entries;
 
 #[path = "vehicle_setup.rs"]
 mod setup;
-pub use setup::{FilterSetup, SET_DRIFT_PER_S, residual_weights, weighted_effects};
+pub use setup::{FilterSetup, SET_DRIFT_PER_S, build, residual_weights, weighted_effects};
 
 /// MIT-UKF, MIT-ESMF and the set-membership filter of one size.
 pub struct FilterPair<const N: usize, const M: usize, const S: usize> {
@@ -259,7 +265,11 @@ impl<const N: usize, const M: usize, const S: usize> FilterPair<N, M, S> {
                 hi[j][c] = s.box_centre[i] + s.box_half[i];
             }
         }
-        AhcSet::new(s.model, s.set_params, &lo[..l], &hi[..l])
+        let set = AhcSet::new(s.model, s.set_params, &lo[..l], &hi[..l]);
+        match &s.set_vertical {
+            Some((gain, offset)) => set.with_vertical(&gain[..l], *offset),
+            None => set,
+        }
     }
 
     fn new_esmf(s: &FilterSetup<N, M>, adapt: AdaptationParams) -> MitEsmf<RateModel<N, M>, N, M> {
@@ -300,14 +310,16 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         self.setup.model.input_dim()
     }
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2] {
-        if y.len() != M {
+        // An a_z beyond the detectors' rows is the set filter's alone.
+        let az = (M == 3 && y.len() == 4).then(|| y[3]);
+        if y.len() != M && az.is_none() {
             let e = EstimatorError::InputDimension {
                 expected: M,
                 got: y.len(),
             };
             return [Err(e.clone()), Err(e)];
         }
-        let y = SVector::<f64, M>::from_column_slice(y);
+        let y = SVector::<f64, M>::from_column_slice(&y[..M]);
         let (ukf, esmf) = (&mut self.ukf, &mut self.esmf);
         // The two filters are independent: inside a rayon pool (replay, eval) they run on two
         // cores; the calling thread takes the (heavier) set filter, so the other core has the
@@ -320,7 +332,7 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             [ukf.try_step(u, &y), esmf.try_step(u, &y).map(|_| ())]
         };
         // The set filter's own failure (non-finite arithmetic) restarts it from its box.
-        let _ = self.set.try_step(u, &y);
+        let _ = self.set.try_step_az(u, &y, az);
         out
     }
     fn coast(&mut self, u: &[f64]) -> [Result<(), EstimatorError>; 2] {
@@ -339,12 +351,18 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
         use crate::model::Model;
         let model = &self.setup.model;
         let mut out = [f64::NAN; 4];
-        if y.len() != M || u.len() != model.input_dim() {
+        let vertical = self.setup.set_vertical.filter(|_| M == 3 && y.len() == 4);
+        if (y.len() != M && vertical.is_none()) || u.len() != model.input_dim() {
             return out;
         }
         let predicted = model.f(&model.healthy_state(*rates_prev), u);
         for i in 0..3 {
             out[i] = y[i] - predicted[i];
+        }
+        if let Some((gain, offset)) = vertical {
+            let l = self.actuators();
+            out[3] = y[3] - offset - (0..l).map(|j| gain[j] * u[j]).sum::<f64>();
+            return out;
         }
         if M == 4 {
             let now = model.healthy_state([y[0], y[1], y[2]]);
@@ -366,6 +384,18 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
     }
     fn guaranteed(&self, j: usize) -> AhcEstimate {
         set_estimate(&self.set, j)
+    }
+    fn set_vertical(&mut self, gain: &[f64], offset: f64) {
+        let mut g = [0.0; MAX_ACTUATORS];
+        let l = self.actuators().min(gain.len());
+        g[..l].copy_from_slice(&gain[..l]);
+        self.setup.set_vertical = (M == 3).then_some((g, offset));
+        self.set = Self::new_set(&self.setup);
+    }
+    fn set_rows(&self) -> usize {
+        self.set
+            .rows()
+            .max(self.setup.set_vertical.map_or(M, |_| 4))
     }
     fn ahc(&self, filter: usize, j: usize) -> AhcEstimate {
         let l = self.actuators();
@@ -547,25 +577,6 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
             self.set.restart();
         }
     }
-}
-
-macro_rules! sized {
-    ($profile:expr, $dt:expr, $l:expr, $m:expr; $(($ll:literal, $mm:literal, $n:literal, $s:literal)),*) => {
-        match ($l, $m) {
-            $(($ll, $mm) => Ok(Box::new(FilterPair::<$n, $mm, $s>::new(
-                FilterSetup::from_profile($profile, $dt)?,
-            )) as Box<dyn VehicleFilters>),)*
-            (l, m) => Err(BuildError::Size { l, m }),
-        }
-    };
-}
-
-/// Both filters for a profile at sample period `dt`.
-pub fn build(profile: &Profile, dt: f64) -> Result<Box<dyn VehicleFilters>, BuildError> {
-    let (l, m) = (profile.actuators.len(), profile.measurements());
-    sized!(profile, dt, l, m;
-        (2, 3, 7, 15), (3, 3, 9, 19), (4, 3, 11, 23), (6, 3, 15, 31), (8, 3, 19, 39),
-        (2, 4, 7, 15), (3, 4, 9, 19), (4, 4, 11, 23), (6, 4, 15, 31), (8, 4, 19, 39))
 }
 
 #[cfg(test)]

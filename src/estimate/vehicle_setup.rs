@@ -29,6 +29,9 @@ pub struct FilterSetup<const N: usize, const M: usize> {
     /// The set-membership filter's stated bounds (until a calibration stretch measures them:
     /// `VehicleFilters::set_residual_bounds`).
     pub set_params: AhcSetParams,
+    /// The set filter's static a_z row when the model predicts the rates only: `g_z` per
+    /// actuator and the trim (`VehicleFilters::set_vertical`).
+    pub set_vertical: Option<([f64; crate::model::MAX_ACTUATORS], f64)>,
 }
 
 /// Without a calibration stretch's measurement, the bound of a row's healthy residual is this
@@ -128,6 +131,7 @@ impl<const N: usize, const M: usize> FilterSetup<N, M> {
             box_centre,
             box_half,
             set_params,
+            set_vertical: None,
             model,
         })
     }
@@ -192,4 +196,23 @@ pub fn weighted_effects(profile: &Profile, dt: f64) -> Vec<[f64; 4]> {
         }
     }
     out
+}
+
+macro_rules! sized {
+    ($profile:expr, $dt:expr, $l:expr, $m:expr; $(($ll:literal, $mm:literal, $n:literal, $s:literal)),*) => {
+        match ($l, $m) {
+            $(($ll, $mm) => Ok(Box::new(FilterPair::<$n, $mm, $s>::new(
+                FilterSetup::from_profile($profile, $dt)?,
+            )) as Box<dyn VehicleFilters>),)*
+            (l, m) => Err(BuildError::Size { l, m }),
+        }
+    };
+}
+
+/// The vehicle's filters (both detectors and the set filter) for a profile at sample period `dt`.
+pub fn build(profile: &Profile, dt: f64) -> Result<Box<dyn VehicleFilters>, BuildError> {
+    let (l, m) = (profile.actuators.len(), profile.measurements());
+    sized!(profile, dt, l, m;
+        (2, 3, 7, 15), (3, 3, 9, 19), (4, 3, 11, 23), (6, 3, 15, 31), (8, 3, 19, 39),
+        (2, 4, 7, 15), (3, 4, 9, 19), (4, 4, 11, 23), (6, 4, 15, 31), (8, 4, 19, 39))
 }

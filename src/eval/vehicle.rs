@@ -139,6 +139,8 @@ pub fn run_vehicle_scenario(
             acting: &s.u[..l],
             attitude: s.attitude,
             residual_from: rates_prev.as_ref(),
+            // The geometry's model: a_z, where measured, is every filter's.
+            set_az: None,
         };
         let t0 = Instant::now();
         let failed = core.step(&step, &mut counters, sink);

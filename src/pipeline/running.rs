@@ -203,6 +203,7 @@ impl VehiclePipeline {
             acting: &prev_u[..r.l],
             attitude: s.attitude,
             residual_from: (!gap && own_inputs).then_some(&rates_before),
+            set_az: s.az.filter(|_| r.m == 3),
         };
         r.core.step(&step, &mut self.counters, sink);
         if let Some(g) = &mut r.gusts {
@@ -326,6 +327,17 @@ impl VehiclePipeline {
         let m = filters.measurements();
         let exogenous = filters.inputs() > l;
         let delay = calibrated.model.arx.as_ref().map_or(0, |a| a.delay);
+        // An identified model's detectors take the rates only (`calibrating`: a static a_z row
+        // cannot follow a helicopter's vertical response and would pull its estimates); the set
+        // filter, whose bound of that row's error is measured on the stretch like the others',
+        // takes a_z through it: without it a helicopter's three swash servos, which the rate
+        // rows see only in combination, are not separable.
+        if let Some(arx) = calibrated.model.arx.as_ref().filter(|_| m == 3)
+            && let Some((gain, offset)) =
+                super::set_bounds::vertical_row(&arx.vertical, samples, delay)
+        {
+            filters.set_vertical(&gain, offset);
+        }
         // The set filter's bounds from this flight's healthy stretch (else the profile's
         // stated noise).
         match super::set_bounds::measure(filters.as_ref(), samples, dt, delay, exogenous) {

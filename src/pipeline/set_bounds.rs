@@ -24,7 +24,7 @@ pub fn measure(
     delay: usize,
     exogenous: bool,
 ) -> Option<([[f64; 4]; LAGS.len()], [f64; MAX_ACTUATORS])> {
-    let (l, m) = (filters.actuators(), filters.measurements());
+    let (l, m) = (filters.actuators(), filters.set_rows());
     let n_in = filters.inputs();
     let longest = *LAGS.last()?;
     let mut bounds = [[0.0f64; 4]; LAGS.len()];
@@ -94,6 +94,25 @@ pub fn measure(
         }
     }
     Some((bounds, mean))
+}
+
+/// The set filter's static a_z row for an identified model, whose detectors take the rates
+/// only: its vertical effect `vertical` (the geometry's) scaled by a fit on the stretch where
+/// that determines it, and the trim; `None` without a_z on most of the stretch. Each a_z is
+/// paired with the commands that acted over its period, `delay` samples late, as the rates are.
+pub fn vertical_row(
+    vertical: &[f64],
+    samples: &[StoredSample],
+    delay: usize,
+) -> Option<(Vec<f64>, f64)> {
+    let l = vertical.len().min(MAX_ACTUATORS);
+    let pairs: Vec<(f64, &[f64])> = (1 + delay..samples.len())
+        .filter_map(|k| Some((samples[k].az?, &samples[k - 1 - delay].u[..l])))
+        .collect();
+    if pairs.is_empty() || pairs.len() * 2 < samples.len() {
+        return None;
+    }
+    crate::model::calibrate::vertical_row(&pairs, vertical)
 }
 
 #[cfg(test)]

@@ -60,6 +60,9 @@ pub struct StepInput<'a> {
     /// change test: the period was not a hole and its inputs are measured ones. `None` skips
     /// the change test for this step.
     pub residual_from: Option<&'a [f64; 3]>,
+    /// a_z when the detectors take the rates only: the set filter's, where it has a vertical
+    /// row ([`VehicleFilters::set_vertical`]).
+    pub set_az: Option<f64>,
 }
 
 impl Core {
@@ -97,7 +100,16 @@ impl Core {
         sink: &mut dyn Sink,
     ) -> [bool; 2] {
         let l = self.l;
-        let res = self.filters.step(s.input, s.y);
+        let mut with_az = [0.0; 4];
+        let y = match s.set_az {
+            Some(a) if s.y.len() == 3 && self.filters.set_rows() == 4 => {
+                with_az[..3].copy_from_slice(s.y);
+                with_az[3] = a;
+                &with_az[..]
+            }
+            _ => s.y,
+        };
+        let res = self.filters.step(s.input, y);
         if let Some(rates_before) = s.residual_from {
             let residual = self.filters.healthy_residual(rates_before, s.input, s.y);
             self.diag.observe(s.t, &residual, s.acting);

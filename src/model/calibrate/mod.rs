@@ -22,6 +22,12 @@ use pem::{MAX_EVALUATIONS, Row, WHITENESS_LIMIT, fit_axis_within};
 use scaled::fit_vertical;
 pub use scaled::{ScaledFit, calibrate_scaled, calibrate_scaled_within};
 
+/// A static a_z row, `a_z = c_z + Σ_j g_z,j u_j`, on `(a_z, commands)` pairs: the geometry's
+/// `base_vertical` scaled where the pairs determine the scale, else as it is, and the trim.
+pub fn vertical_row(with_az: &[(f64, &[f64])], base_vertical: &[f64]) -> Option<(Vec<f64>, f64)> {
+    scaled::fit_vertical(with_az, base_vertical).map(|v| (v.vertical, v.offset))
+}
+
 #[derive(Debug, Error, PartialEq)]
 pub enum CalibrationError {
     #[error("{got} usable samples: at least {need} are needed for {l} actuators")]
