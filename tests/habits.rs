@@ -331,8 +331,8 @@ fn a_one_hour_plot_is_small_and_reads_as_a_clock() {
         assert!(text.contains(tick), "no tick {tick}");
     }
     assert!(!text.contains(">-0.0"), "a tick reads -0");
-    // Four motors, gamma and delta each.
-    assert_eq!(text.matches("<rect x=").count(), 8);
+    // Four motors, gamma, delta and the output at the recent command each.
+    assert_eq!(text.matches("<rect x=").count(), 12);
     let checked = common::run_python(&[
         "-c",
         "import sys, xml.dom.minidom as m; m.parse(sys.argv[1]); print('ok')",
