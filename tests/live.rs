@@ -507,6 +507,10 @@ fn demo_alerts_reach_a_pymavlink_listener() {
         assert!(estimated.iter().any(|n| n == name), "{estimated:?}");
     }
     assert_eq!(seen["ahc_estimate_bad"], serde_json::json!([]), "{seen}");
+    // Its extension fields: the output's bounds at the recent command, the set filter's finite
+    // once calibrated (the helicopter's servos through a_z).
+    assert!(seen["set_output_bounded"].as_u64().unwrap() > 0, "{seen}");
+    assert!(seen["command_ref_nonzero"].as_u64().unwrap() > 0, "{seen}");
 }
 
 /// MAVProxy (tests/reference/requirements-nodeps.txt) listening on `masters` and sending to `out` (all on

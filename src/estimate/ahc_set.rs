@@ -12,8 +12,9 @@
 //! (rows p, q, r and, measured, a_z; `B` the model's effect of one unit of output on each row
 //! over a step). A model that predicts the rates only (an identified helicopter's) may still
 //! give the set a static a_z row ([`AhcSet::with_vertical`]): `a_z - c_z = Σ g_z,j η_j + e`, its
-//! bound measured like the others'; it bounds the levels, not the changes (see below). `e` is what the healthy model leaves unexplained on a step (gusts, model error,
-//! the gyro's noise on both samples); `σ(0)` is its stated bound, `σ(m)` that of its change
+//! bound measured like the others'; it bounds the levels, not the changes (see below). `e` is
+//! what the healthy model leaves unexplained on a step (gusts, model error, the gyro's noise on
+//! both samples); `σ(0)` is its stated bound, `σ(m)` that of its change
 //! over `m` samples (both from the calibration stretch, with a margin).
 //!
 //! **Each sample bounds each output.** When `B` has full column rank (at least as many
@@ -91,7 +92,8 @@ struct Past {
     u: [f64; MAX_ACTUATORS],
 }
 
-/// Set-membership AHC estimator of a vehicle with `N = 3 + 2l` model states and `M` rows.
+/// Set-membership AHC estimator of a vehicle with `N = 3 + 2l` model states and `M` measured
+/// rows (and, with `M` = 3, perhaps a static a_z row: [`AhcSet::with_vertical`]).
 #[derive(Debug, Clone)]
 pub struct AhcSet<const N: usize, const M: usize> {
     pub model: RateModel<N, M>,
@@ -189,7 +191,9 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
             .residual_bound
             .iter()
             .all(|b| b[3].is_finite() && b[3] > 0.0);
-        if M != 3 || gain.len() < self.l || !bounded || !offset.is_finite() {
+        let gain = &gain[..self.l.min(gain.len())];
+        let acts = gain.iter().all(|g| g.is_finite()) && gain.iter().any(|g| g.abs() > 1e-12);
+        if M != 3 || gain.len() < self.l || !acts || !bounded || !offset.is_finite() {
             return self;
         }
         self.effect[3][..self.l].copy_from_slice(&gain[..self.l]);
@@ -321,8 +325,9 @@ impl<const N: usize, const M: usize> AhcSet<N, M> {
             self.keep_in_prior();
             return Ok(());
         };
+        // No a_z: nothing bounded this step (the recent command's window goes on: the row
+        // takes no changes, which the window would otherwise have to restart for).
         if self.vertical_offset.is_some() && vertical.is_none() {
-            self.valid = [0; MAX_ACTUATORS];
             self.keep_in_prior();
             return Ok(());
         }

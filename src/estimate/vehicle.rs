@@ -38,8 +38,9 @@ pub trait VehicleFilters: Send {
     /// previous step's measured rate increment.
     fn inputs(&self) -> usize;
     fn measurements(&self) -> usize;
-    /// One step of both filters. `u.len()` = [`VehicleFilters::inputs`] (the commands, then for
-    /// an identified model the previous measured rate increment), `y` = [p, q, r(, a_z)].
+    /// One step of the filters. `u.len()` = [`VehicleFilters::inputs`] (the commands, then for
+    /// an identified model the previous measured rate increment), `y` = [p, q, r(, a_z)]: with
+    /// three measurements a fourth, a_z, goes to the set filter's vertical row alone.
     fn step(&mut self, u: &[f64], y: &[f64]) -> [Result<(), EstimatorError>; 2];
     /// Both filters over a period whose sample was lost: the prediction only, with the inputs
     /// that acted then (`u` as for `step`). Then the next `step` compares its measurement
@@ -64,9 +65,10 @@ pub trait VehicleFilters: Send {
     /// Actuator `j`'s guaranteed estimate: the set-membership filter's.
     fn guaranteed(&self, j: usize) -> AhcEstimate;
     /// A static a_z row for the set filter when the detectors take the rates only (`g_z` per
-    /// actuator, the trim): `step` then takes a fourth measurement, a_z, for the set alone, and
-    /// `healthy_residual` its residual. It bounds once `set_residual_bounds` states its bound.
-    fn set_vertical(&mut self, gain: &[f64], offset: f64);
+    /// actuator, the trim; `None` takes it away): `step` then takes a fourth measurement, a_z,
+    /// for the set alone, and `healthy_residual` its residual. It bounds once
+    /// `set_residual_bounds` states its bound.
+    fn set_vertical(&mut self, row: Option<(&[f64], f64)>);
     /// The rows of the set filter's residual: `measurements()`, or 4 with a vertical row.
     fn set_rows(&self) -> usize;
     /// The normalised innovation square (UKF) or `M (1 - consistency)` (ESMF) of the last step.
@@ -385,11 +387,14 @@ impl<const N: usize, const M: usize, const S: usize> VehicleFilters for FilterPa
     fn guaranteed(&self, j: usize) -> AhcEstimate {
         set_estimate(&self.set, j)
     }
-    fn set_vertical(&mut self, gain: &[f64], offset: f64) {
-        let mut g = [0.0; MAX_ACTUATORS];
-        let l = self.actuators().min(gain.len());
-        g[..l].copy_from_slice(&gain[..l]);
-        self.setup.set_vertical = (M == 3).then_some((g, offset));
+    fn set_vertical(&mut self, row: Option<(&[f64], f64)>) {
+        let l = self.actuators();
+        self.setup.set_vertical = row.filter(|_| M == 3).map(|(gain, offset)| {
+            let mut g = [0.0; MAX_ACTUATORS];
+            let n = l.min(gain.len());
+            g[..n].copy_from_slice(&gain[..n]);
+            (g, offset)
+        });
         self.set = Self::new_set(&self.setup);
     }
     fn set_rows(&self) -> usize {

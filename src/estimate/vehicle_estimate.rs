@@ -57,7 +57,13 @@ impl AhcEstimate {
     pub fn output_probable(&self, u: f64) -> [f64; 3] {
         let [gg, gd, dd] = self.block;
         let centre = (self.gamma - 1.0) * u + self.delta;
-        let sd = (u * u * gg + 2.0 * u * gd + dd).max(0.0).sqrt();
+        let var = u * u * gg + 2.0 * u * gd + dd;
+        // A NaN block stays NaN (`f64::max` would take the 0).
+        let sd = if var.is_nan() {
+            var
+        } else {
+            var.max(0.0).sqrt()
+        };
         [centre, centre - 3.0 * sd, centre + 3.0 * sd]
     }
 }

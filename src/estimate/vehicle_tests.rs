@@ -506,3 +506,74 @@ fn truth<const N: usize, const M: usize>(
     }
     y
 }
+
+/// A vertical row on the set filter of a rates-only model (`set_vertical`): the detectors are
+/// the same whether `step` gets a_z or not, the healthy residual gains the row's
+/// (`a_z - c_z - Σ g_z,j u_j`), and the set, which cannot separate four motors on three rows,
+/// bounds each motor's output with it; taken away, the set has three rows again.
+#[test]
+fn a_vertical_row_reaches_the_set_filter_alone() {
+    use crate::sim::vehicle::{VehicleSim, VehicleSimConfig};
+    let dt = 0.02;
+    let with_az = Profile::resolve("quad-x").unwrap();
+    let mut rates_only = with_az.clone();
+    rates_only.model.measure_az = false;
+    let p = with_az.rate_params();
+    let mut plain = build(&rates_only, dt).unwrap();
+    let mut row = build(&rates_only, dt).unwrap();
+    row.set_vertical(Some((&p.vertical, p.vertical_offset)));
+    assert_eq!(
+        (plain.set_rows(), row.set_rows(), row.measurements()),
+        (3, 4, 3)
+    );
+    // Generous stated bounds (the calm flight's residuals are far inside them).
+    let mut bounds = [[0.05, 0.05, 0.05, 1.0]; LAGS.len()];
+    for b in bounds.iter_mut().skip(1) {
+        *b = b.map(|v| 2.0 * v);
+    }
+    let command_ref = [0.5; MAX_ACTUATORS];
+    plain.set_residual_bounds(bounds, command_ref);
+    row.set_residual_bounds(bounds, command_ref);
+    let mut sim = VehicleSim::new(VehicleSimConfig::calm(with_az, dt, 11)).unwrap();
+    let mut previous = None;
+    for _ in 0..(10.0 / dt) as usize {
+        let s = sim.step();
+        let u = &s.u[..4];
+        plain.step(u, &s.y[..3]);
+        row.step(u, &s.y[..4]);
+        for f in 0..2 {
+            for j in 0..4 {
+                let (a, b) = (plain.ahc(f, j), row.ahc(f, j));
+                assert_eq!(
+                    (a.gamma, a.delta, a.gamma_lo),
+                    (b.gamma, b.delta, b.gamma_lo)
+                );
+            }
+        }
+        if let Some(prev) = previous {
+            let (a, b) = (
+                plain.healthy_residual(&prev, u, &s.y[..3]),
+                row.healthy_residual(&prev, u, &s.y[..4]),
+            );
+            assert_eq!(a[..3], b[..3]);
+            let want =
+                s.y[3] - p.vertical_offset - (0..4).map(|j| p.vertical[j] * u[j]).sum::<f64>();
+            assert!((b[3] - want).abs() < 1e-12, "{} against {want}", b[3]);
+        }
+        previous = Some([s.y[0], s.y[1], s.y[2]]);
+    }
+    for j in 0..4 {
+        assert!(plain.guaranteed(j).output_bounds.is_none());
+        let [lo, hi] = row
+            .guaranteed(j)
+            .output_bounds
+            .expect("bounded through a_z");
+        assert!(
+            lo <= 0.0 && 0.0 <= hi && hi - lo < 1.0,
+            "motor {}: [{lo}, {hi}]",
+            j + 1
+        );
+    }
+    row.set_vertical(None);
+    assert_eq!(row.set_rows(), 3);
+}

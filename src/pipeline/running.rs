@@ -336,11 +336,18 @@ impl VehiclePipeline {
             && let Some((gain, offset)) =
                 super::set_bounds::vertical_row(&arx.vertical, samples, delay)
         {
-            filters.set_vertical(&gain, offset);
+            filters.set_vertical(Some((&gain, offset)));
         }
         // The set filter's bounds from this flight's healthy stretch (else the profile's
-        // stated noise).
-        match super::set_bounds::measure(filters.as_ref(), samples, dt, delay, exogenous) {
+        // stated noise). A vertical row needs a_z on a run as long as the rates': without
+        // one (a_z slower than the rates) the rates' bounds are measured without the row.
+        let mut measured =
+            super::set_bounds::measure(filters.as_ref(), samples, dt, delay, exogenous);
+        if measured.is_none() && filters.set_rows() > filters.measurements() {
+            filters.set_vertical(None);
+            measured = super::set_bounds::measure(filters.as_ref(), samples, dt, delay, exogenous);
+        }
+        match measured {
             Some((bounds, command_ref)) => {
                 tracing::debug!(sysid = self.sysid, ?bounds, "set filter: residual bounds per lag");
                 filters.set_residual_bounds(bounds, command_ref)

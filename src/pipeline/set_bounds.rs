@@ -180,6 +180,43 @@ mod tests {
         assert!((mean[0] - u0).abs() < 1e-12);
     }
 
+    /// The vertical row pairs each a_z with the commands `delay` samples before the ones that
+    /// acted over its period: on an a_z made from commands three samples before (delay 2)
+    /// exactly, its scale and trim come back with delay 2, not with delay 0; without a_z on
+    /// most samples there is no row.
+    #[test]
+    fn the_vertical_row_pairs_a_z_with_the_delayed_commands() {
+        let base = [-2.0, -2.0, -2.0, 0.0];
+        let mut rng = crate::sim::rng::Rng::new(3);
+        let u: Vec<[f64; MAX_ACTUATORS]> = (0..400)
+            .map(|_| {
+                let mut c = [0.0; MAX_ACTUATORS];
+                c[..4].iter_mut().for_each(|v| *v = rng.uniform(0.5));
+                c
+            })
+            .collect();
+        let mut samples: Vec<StoredSample> = (0..u.len())
+            .map(|k| StoredSample {
+                t: 0.02 * k as f64,
+                rates: [0.0; 3],
+                u: u[k],
+                az: (k >= 3)
+                    .then(|| -9.8 + 1.5 * (0..4).map(|j| base[j] * u[k - 3][j]).sum::<f64>()),
+            })
+            .collect();
+        let (gain, offset) = vertical_row(&base, &samples, 2).unwrap();
+        for (g, b) in gain.iter().zip(base) {
+            assert!((g - 1.5 * b).abs() < 1e-9, "{gain:?}");
+        }
+        assert!((offset + 9.8).abs() < 1e-9);
+        let (gain, _) = vertical_row(&base, &samples, 0).unwrap();
+        assert!((gain[0] - 1.5 * base[0]).abs() > 0.1, "{gain:?}");
+        for s in samples.iter_mut().skip(150) {
+            s.az = None;
+        }
+        assert!(vertical_row(&base, &samples, 2).is_none());
+    }
+
     /// A stretch without an unbroken run longer than the longest lag gives no bounds (the
     /// profile's stated ones stand): every 20th sample is late by two periods.
     #[test]

@@ -224,8 +224,8 @@ impl VehicleFilters for Recorder {
     ) {
         self.inner.set_residual_bounds(bounds, command_ref)
     }
-    fn set_vertical(&mut self, gain: &[f64], offset: f64) {
-        self.inner.set_vertical(gain, offset)
+    fn set_vertical(&mut self, row: Option<(&[f64], f64)>) {
+        self.inner.set_vertical(row)
     }
     fn set_rows(&self) -> usize {
         self.inner.set_rows()

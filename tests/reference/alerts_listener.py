@@ -48,7 +48,8 @@ def receive():
 
 print("ready", flush=True)
 seen = {"heartbeat": [], "statustext": [], "named_value_float": [], "ahc_estimate": 0, "sysids": [],
-        "ahc_estimate_names": [], "ahc_estimate_bad": [], "set_unexcited": [], "bad_data": 0}
+        "ahc_estimate_names": [], "ahc_estimate_bad": [], "set_unexcited": [], "bad_data": 0,
+        "set_output_bounded": 0, "command_ref_nonzero": 0}
 
 
 def check_estimate(m):
@@ -98,6 +99,9 @@ def handle(m):
         if m.set_unexcited not in seen["set_unexcited"]:
             seen["set_unexcited"].append(m.set_unexcited)
         seen["ahc_estimate_bad"] += [f"{name}: {b}" for b in check_estimate(m)]
+        # The extension fields arrived (a sender without them reads as zeros here).
+        seen["set_output_bounded"] += int(math.isfinite(m.set_output_lo) and m.set_output_lo < m.set_output_hi)
+        seen["command_ref_nonzero"] += int(m.command_ref != 0.0)
 
 
 end = time.time() + timeout
