@@ -539,8 +539,13 @@ fn a_vertical_row_reaches_the_set_filter_alone() {
     for _ in 0..(10.0 / dt) as usize {
         let s = sim.step();
         let u = &s.u[..4];
-        plain.step(u, &s.y[..3]);
-        row.step(u, &s.y[..4]);
+        for r in plain
+            .step(u, &s.y[..3])
+            .into_iter()
+            .chain(row.step(u, &s.y[..4]))
+        {
+            r.unwrap();
+        }
         for f in 0..2 {
             for j in 0..4 {
                 let (a, b) = (plain.ahc(f, j), row.ahc(f, j));
