@@ -238,6 +238,25 @@ fn vehicle_filter_steps_allocate_nothing() {
         reseated >= 150,
         "the identification was followed on {reseated} steps only"
     );
+    // Rates-only detectors with the set filter's a_z row (a helicopter's identified model):
+    // a_z beside the rates, every fifth sample without it.
+    let mut rates_only = profile.clone();
+    rates_only.model.measure_az = false;
+    let p = profile.rate_params();
+    let mut row =
+        FilterPair::<11, 3, 23>::new(FilterSetup::from_profile(&rates_only, 0.02).unwrap());
+    row.set_vertical(Some((&p.vertical, p.vertical_offset)));
+    let bounds = [[0.05, 0.05, 0.05, 1.0]; ahcmon::estimate::ahc_set::LAGS.len()];
+    row.set_residual_bounds(bounds, [0.5; ahcmon::model::MAX_ACTUATORS]);
+    assert_eq!(row.set_rows(), 4);
+    let n = count(|| {
+        for (k, s) in samples.iter().enumerate() {
+            let y = if k % 5 == 4 { &s.y[..3] } else { &s.y[..4] };
+            assert!(row.step(&s.u[..4], y).iter().all(|r| r.is_ok()));
+        }
+    });
+    assert_eq!(n, 0, "the set's a_z row: {n} allocations in 1000 steps");
+    assert!(row.guaranteed(1).output_bounds.is_some());
     // Eight actuators: the quad's motors twice over (an X8-like coaxial layout).
     let mut octo = profile.clone();
     let mut extra = octo.actuators.clone();
