@@ -51,12 +51,17 @@ impl AhcEstimate {
         (c * dg * dg - 2.0 * b * dg * dd + a * dd * dd) / det
     }
 
+    /// The estimate's output less the healthy one at command `u`, `(γ - 1) u + δ`.
+    pub fn output_at(&self, u: f64) -> f64 {
+        (self.gamma - 1.0) * u + self.delta
+    }
+
     /// A Kalman filter's estimate of the output's departure from the healthy one at command
     /// `u`, `(γ - 1) u + δ`, and its probable bounds (±3σ of its (γ, δ) covariance block):
     /// `[estimate, lo, hi]`, to set beside the set filter's guaranteed `output_bounds`.
     pub fn output_probable(&self, u: f64) -> [f64; 3] {
         let [gg, gd, dd] = self.block;
-        let centre = (self.gamma - 1.0) * u + self.delta;
+        let centre = self.output_at(u);
         let var = u * u * gg + 2.0 * u * gd + dd;
         // A NaN block stays NaN (`f64::max` would take the 0).
         let sd = if var.is_nan() {

@@ -121,9 +121,8 @@ impl PlotRecorder {
             for (f, series) in self.traces[idx].1.iter_mut().enumerate() {
                 let e = est[PLOTTED[f]][j];
                 let output = if PLOTTED[f] == 2 {
-                    let centre = (e.gamma - 1.0) * command + e.delta;
                     let [lo, hi] = e.output_bounds.unwrap_or([f64::NAN; 2]);
-                    [centre, lo, hi]
+                    [e.output_at(command), lo, hi]
                 } else {
                     e.output_probable(command)
                 };

@@ -229,10 +229,14 @@ pub(super) fn actuator_table(
         // What the set bounds before it splits gain from bias: the output's departure from
         // the healthy one at the recent command (healthy 0).
         let output = match set.output_bounds {
-            Some([lo, hi]) => {
-                let centre = (set.gamma - 1.0) * set.command_ref + set.delta;
-                bound_bar(centre, lo, hi, 0.0, (-0.5, 0.5), bar)
-            }
+            Some([lo, hi]) => bound_bar(
+                set.output_at(set.command_ref),
+                lo,
+                hi,
+                0.0,
+                (-0.5, 0.5),
+                bar,
+            ),
             None => format!("{:<bar$}", unexcited),
         };
         let mut row = Row::new(vec![
