@@ -43,55 +43,69 @@ impl Sink for Collect {
 
 /// The set filter's guaranteed bounds against a log's truth-equivalent fault on actuator `j`
 /// (`gamma` the multiplier; `delta` its equivalent: `gamma - 1` for a swash servo, whose trim
-/// is mid-throw, 0 for a motor, whose is at its minimum) from `on` to `off`.
+/// is mid-throw, 0 for a motor, whose is at its minimum) from `on` to `off`. Gain figures count
+/// the steps where the gain is excited (its bound no longer the a priori box's extent), output
+/// figures those where the output is bounded; "others" are every actuator's steps but the
+/// faulty one's from the onset to 2 s after the fault's end.
 #[derive(Debug)]
 struct SetFigures {
-    /// The fault's steps with its gamma and delta inside the bounds.
+    /// The fault's excited steps with its gamma and delta inside the bounds.
     fault_inside: f64,
     /// The fault's bounded steps with its output `(γ - 1) ū + δ` at the recent command inside.
     output_inside: f64,
-    /// When the fault's output bound first left 0 out (s after the onset).
+    /// When the fault's output bound first left 0 out (s after the onset; it held 0 on the
+    /// last bounded step before).
     zero_out_after: Option<f64>,
-    /// Every other actuator's steps, and the faulty one's before the onset: the output bound
-    /// holding 0, the gain bound holding 1.
+    /// The others' output bounds holding 0, and their excited gain bounds holding 1.
     others_output_hold_0: f64,
     others_gain_hold_1: f64,
+    /// The share of the others' steps with the gain excited.
+    others_gain_excited: f64,
 }
 
 fn set_figures(c: &Collect, (on, off): (f64, f64), j: usize, gamma: f64, delta: f64) -> SetFigures {
     let share = |(n, of): (usize, usize)| n as f64 / of.max(1) as f64;
     let (mut fault, mut output, mut hold_0, mut hold_1) = ((0, 0), (0, 0), (0, 0), (0, 0));
-    let mut zero_out_after = None;
+    let (mut zero_out_after, mut held_0_before, mut steps) = (None, false, 0);
     for (t, est) in &c.all {
         for (k, e) in est[2].iter().enumerate() {
             let bounds = e.output_bounds;
+            let excited = !e.unexcited[0];
+            if k == j && *t < on {
+                held_0_before = bounds.is_some_and(|[lo, hi]| (lo..=hi).contains(&0.0));
+            }
             if k == j && *t >= on && *t < off {
-                fault.1 += 1;
-                fault.0 += usize::from(
-                    (e.gamma_lo..=e.gamma_hi).contains(&gamma)
-                        && (e.delta_lo..=e.delta_hi).contains(&delta),
-                );
+                if excited {
+                    fault.1 += 1;
+                    fault.0 += usize::from(
+                        (e.gamma_lo..=e.gamma_hi).contains(&gamma)
+                            && (e.delta_lo..=e.delta_hi).contains(&delta),
+                    );
+                }
                 if let Some([lo, hi]) = bounds {
                     let truth = (gamma - 1.0) * e.command_ref + delta;
                     output.1 += 1;
                     output.0 += usize::from((lo..=hi).contains(&truth));
-                    if zero_out_after.is_none() && !(lo..=hi).contains(&0.0) {
+                    if held_0_before && zero_out_after.is_none() && !(lo..=hi).contains(&0.0) {
                         zero_out_after = Some(t - on);
                     }
                 }
-            } else if k != j || *t < on {
+            } else if k != j || *t < on || *t >= off + 2.0 {
+                steps += 1;
                 if let Some([lo, hi]) = bounds {
                     hold_0.1 += 1;
                     hold_0.0 += usize::from((lo..=hi).contains(&0.0));
                 }
-                hold_1.1 += 1;
-                hold_1.0 += usize::from((e.gamma_lo..=e.gamma_hi).contains(&1.0));
+                if excited {
+                    hold_1.1 += 1;
+                    hold_1.0 += usize::from((e.gamma_lo..=e.gamma_hi).contains(&1.0));
+                }
             }
         }
     }
     assert!(
-        fault.1 > 500 && output.1 > 500 && hold_1.1 > 3000,
-        "{fault:?} {output:?} {hold_1:?}"
+        fault.1 > 500 && output.1 > 500 && hold_0.1 > 3000 && hold_1.1 > 1000,
+        "{fault:?} {output:?} {hold_0:?} {hold_1:?}"
     );
     SetFigures {
         fault_inside: share(fault),
@@ -99,21 +113,23 @@ fn set_figures(c: &Collect, (on, off): (f64, f64), j: usize, gamma: f64, delta: 
         zero_out_after,
         others_output_hold_0: share(hold_0),
         others_gain_hold_1: share(hold_1),
+        others_gain_excited: share((hold_1.1, steps)),
     }
 }
 
 /// What every log's guaranteed bounds meet (docs/results.md, the SITL table): the fault's
-/// coefficients and output inside on 99 %, 0 left out within 0.1 s of the onset, every other
-/// step's output bound holding 0 on 99 %; and, where given, the gain bounds holding 1 on
-/// `gain_hold_1`.
-fn assert_set_figures(f: &SetFigures, gain_hold_1: Option<f64>) {
+/// coefficients and output inside on 99 % of its steps, 0 left out within 0.1 s of the onset,
+/// the others' output bounds holding 0 on 99 %; and their gain bounds holding 1 on
+/// `gain_hold_1` (issue 41 asks 99 %; a guarantee means every step).
+fn assert_set_figures(f: &SetFigures, gain_hold_1: f64) {
     println!("{f:?}");
     assert!(f.fault_inside >= 0.99 && f.output_inside >= 0.99, "{f:?}");
     assert!(f.zero_out_after.is_some_and(|s| s <= 0.1), "{f:?}");
     assert!(f.others_output_hold_0 >= 0.99, "{f:?}");
-    if let Some(share) = gain_hold_1 {
-        assert!(f.others_gain_hold_1 >= share, "{f:?}");
-    }
+    // The gain figure rests on a quarter of the steps at least (the helicopter's hover excites
+    // its swash servos' gains on 27 %).
+    assert!(f.others_gain_excited >= 0.25, "{f:?}");
+    assert!(f.others_gain_hold_1 >= gain_hold_1, "{f:?}");
 }
 
 /// A log under replay/tlogs.
@@ -232,8 +248,9 @@ fn quadx_maneuvers_motor4_gain_fault() {
     // Cleared after removal.
     cleared_without_a_new_class(&c, off, "motor4");
     no_class_returns(&c, "motor4");
-    // The issue asks for the gain bounds to hold 1 on 99 %: 98.2 % here.
-    assert_set_figures(&set_figures(&c, (on, off), 3, 0.7, 0.0), Some(0.98));
+    // Issue 41 asks for the healthy gain bounds to hold 1 on 99 % of the steps: 98.0 % here, a
+    // floor against a further fall.
+    assert_set_figures(&set_figures(&c, (on, off), 3, 0.7, 0.0), 0.975);
 }
 
 #[test]
@@ -285,8 +302,10 @@ fn quad_plus_hover_motor1_gain_fault() {
     assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     cleared_without_a_new_class(&c, off, "motor1");
     no_class_returns(&c, "motor1");
-    // The outputs' bounds hold; the gains' do not (the test below).
-    assert_set_figures(&set_figures(&c, (on, off), 0, 0.7, 0.0), None);
+    // The outputs' bounds hold; the healthy gains' do on 61.1 % of the excited steps, where 99 %
+    // is asked and a guarantee means all (the ignored test below): a floor against a further
+    // fall.
+    assert_set_figures(&set_figures(&c, (on, off), 0, 0.7, 0.0), 0.60);
     // Once cleared, the MIT-UKF's gain and bias are back at the healthy point: the still
     // hover cannot move the fault's split of the output back (without the return to the prior
     // on clearing, gamma stayed at 0.87 and delta at +0.084, bounds excluding 1).
@@ -375,7 +394,7 @@ fn heli_hover_servo1_gain_fault() {
     // from 120 s to 132 s). Nor is it called stuck while the MIT-UKF's gamma swings through
     // zero on its way from 1 (it read stuck for 3 s).
     no_class_returns(&c, "swash1");
-    assert_set_figures(&set_figures(&c, (on, off), 0, 0.7, -0.3), Some(0.99));
+    assert_set_figures(&set_figures(&c, (on, off), 0, 0.7, -0.3), 0.99);
     assert!(
         c.decisions
             .iter()
@@ -425,21 +444,22 @@ fn heli_maneuvers_servo3_gain_fault() {
     assert!(worst <= 0.1, "MIT-UKF gamma off by {worst:.3}");
     cleared_without_a_new_class(&c, off, "swash3");
     no_class_returns(&c, "swash3");
-    assert_set_figures(&set_figures(&c, (on, off), 2, 0.75, -0.25), Some(0.99));
+    assert_set_figures(&set_figures(&c, (on, off), 2, 0.75, -0.25), 0.99);
 }
 
-/// The hover quad's healthy motors' gain bounds hold 1 on 99 % of the steps, as the set filter
-/// states: they do on 71.7 % (its hover calibration's yaw is some 2.8 times too weak and the
-/// fault's first 0.4 s cut motors 3 and 4 beside the truth; docs/results.md).
+/// The hover quad's healthy motors' gain bounds hold 1 on 99 % of the excited steps, as issue
+/// 41 asks: they do on 61.1 % (its hover calibration's yaw is some 2.8 times too weak, and the
+/// fault's first 0.4 s cut motors 3 and 4 beside the truth; motor 1's excludes 1 for 14.7 s after
+/// the fault; docs/results.md).
 #[test]
-#[ignore = "known defect, open in issue 41: 71.7 % (docs/results.md, the SITL table)"]
+#[ignore = "known defect, open in issue 41: 61.1 % (docs/results.md, the SITL table)"]
 fn quad_plus_hover_healthy_gain_bounds_hold_1() {
     let (on, off) = (112.42 + 1.05, 132.44 + 1.05);
     let c = replay(
         "sitl_quad_motor1_gain0p7/arducopter_quad_sitl_motor1_mul0.7.tlog",
         Some("quad-plus"),
     );
-    assert_set_figures(&set_figures(&c, (on, off), 0, 0.7, 0.0), Some(0.99));
+    assert_set_figures(&set_figures(&c, (on, off), 0, 0.7, 0.0), 0.99);
 }
 
 #[test]

@@ -312,11 +312,11 @@ fn concentrated(rows: &[Row], p: &[f64; 3]) -> Option<Concentrated> {
     concentrated_with(rows, p, true)
 }
 
-/// [`concentrated`]; `reuse` takes a measured row's covariance step from the previous one
-/// when it starts from the same covariance, bit for bit. The recursion does not depend on the
-/// data and settles within tens of rows to a fixed point, after which every row's step is the
-/// last one's: the same numbers without the divisions and logarithm on the recursion's serial
-/// path.
+/// [`concentrated`]; `reuse` takes a one-period measured row's covariance step from the last
+/// such row's when it starts from the same covariance, bit for bit. The recursion does not
+/// depend on the data and usually settles within tens of rows to a fixed point, after which
+/// every row's step is the last one's: the same numbers without the divisions and logarithm on
+/// the recursion's serial path (where it does not settle, nothing is reused).
 #[allow(clippy::many_single_char_names)]
 fn concentrated_with(rows: &[Row], p: &[f64; 3], reuse: bool) -> Option<Concentrated> {
     let [a, phi, log_ratio] = *p;

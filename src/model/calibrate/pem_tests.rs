@@ -150,39 +150,72 @@ fn too_little_data_gives_no_fit() {
 }
 
 /// Reusing a measured row's covariance step changes nothing: the likelihood, gain, offset and
-/// noise are the same bit for bit as from the plain recursion, on rows with holes bridged,
-/// restarts and filled rows, over parameters spread across the model's range.
+/// noise are the same bit for bit as from the plain recursion, over parameters spread across
+/// the model's range, on rows with holes bridged, restarts and filled rows, and on rows with
+/// long unbroken runs, where the reuse engages: the recursion repeats itself bit for bit within
+/// such a run for most of the parameters (checked).
 #[test]
 fn reused_covariance_steps_give_the_same_numbers() {
     let mut rng = Rng::new(7);
+    let (mut draws, mut settled, run) = (0, 0, 600);
     for seed in 1..=4 {
-        let lose = |k: usize| k % 10 == 9 || (k % 97) < 3 || (k % 700) < 40;
-        let (mut rows, _, _) = gusty_axis(seed, 2000, lose);
-        for (k, row) in rows.iter_mut().enumerate() {
+        let broken = |k: usize| k % 10 == 9 || (k % 97) < 3 || (k % 700) < 40;
+        let (mut mixed, _, _) = gusty_axis(seed, 2000, broken);
+        for (k, row) in mixed.iter_mut().enumerate() {
             if k % 37 == 5 && row.link == Link::Next {
                 row.link = Link::Filled;
             }
         }
-        assert!(rows.iter().any(|r| matches!(r.link, Link::Restart(_))));
-        assert!(rows.iter().any(|r| matches!(r.link, Link::Across(_))));
+        assert!(
+            mixed
+                .iter()
+                .any(|r| matches!(r.link, Link::Restart(s) if s > 0))
+        );
+        assert!(mixed.iter().any(|r| matches!(r.link, Link::Across(_))));
+        assert!(mixed.iter().any(|r| r.link == Link::Filled));
+        let (long, _, _) = gusty_axis(seed, 2000, |k| (k % 700) < 40);
         for _ in 0..50 {
             let p = [
                 0.05 + 0.94 * rng.uniform01(),
                 PHI_MAX * rng.uniform01(),
                 -8.0 + 16.0 * rng.uniform01(),
             ];
-            let (plain, reused) = (
-                concentrated_with(&rows, &p, false).expect("a fit"),
-                concentrated_with(&rows, &p, true).expect("a fit"),
-            );
-            for (x, y) in [
-                (plain.cost, reused.cost),
-                (plain.beta, reused.beta),
-                (plain.c, reused.c),
-                (plain.r, reused.r),
-            ] {
-                assert_eq!(x.to_bits(), y.to_bits(), "seed {seed} at {p:?}");
+            for rows in [&mixed, &long] {
+                let (plain, reused) = (
+                    concentrated_with(rows, &p, false).expect("a fit"),
+                    concentrated_with(rows, &p, true).expect("a fit"),
+                );
+                for (x, y) in [
+                    (plain.cost, reused.cost),
+                    (plain.beta, reused.beta),
+                    (plain.c, reused.c),
+                    (plain.r, reused.r),
+                ] {
+                    assert_eq!(x.to_bits(), y.to_bits(), "seed {seed} at {p:?}");
+                }
             }
+            draws += 1;
+            settled += usize::from(repeats_within(&p, run));
         }
     }
+    assert!(
+        settled * 10 >= draws * 8,
+        "{settled} of {draws} settle within {run} rows"
+    );
+}
+
+/// The measured rows' covariance recursion from its start returns to a state it just left,
+/// bit for bit, within `rows` rows.
+fn repeats_within(p: &[f64; 3], rows: usize) -> bool {
+    let [a, phi, log_ratio] = *p;
+    let q = log_ratio.exp();
+    let mut c = (1.0, 0.0, q / (1.0 - phi * phi));
+    for _ in 0..rows {
+        let next = measured_step(predicted_covariance(a, phi, q, c)).updated;
+        if same_bits(next, c) {
+            return true;
+        }
+        c = next;
+    }
+    false
 }
